@@ -1,0 +1,30 @@
+"""cvxdual: dual (stress-based) finite element analysis of frictionless contact of two plane
+elastic bodies with an enlarging contact zone, after Tran Van Bon (1986), on CVXPY.
+
+Names from the paper are used where they help a reader holding it: ``lam`` (stress),
+``eps`` (initial gap), ``E``, ``A_h``, ``Z``, ``T`` (the paper's ``F``), ``J0``/``J-``,
+``K0h`` (the cone of admissible test displacements), ``S_h`` (piecewise-constant stresses).
+"""
+
+from .assembly import System, assemble
+from .dual import DualModel
+from .errors import (AccuracyError, CvxdualError, MeshError, NoAdmissibleStressError, OutputError,
+                     SceneError, SolverError, UnbalancedLoadError, UnknownSolverError)
+from .exact import exact_field
+from .materials import Material
+from .mesh import build_mesh
+from .primal import PrimalModel
+from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
+from .scenefile import builtin_scenes, load_scene
+from .solution import Solution, build_model, recover, solve
+from .triangulation import discretize
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",
+    "MeshError", "MeshSpec", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
+    "SceneError", "Solution", "SolverError", "System", "Traction", "UnbalancedLoadError",
+    "UnknownSolverError", "assemble", "build_mesh", "build_model", "builtin_scenes", "discretize", "exact_field",
+    "load_scene", "recover", "solve",
+]

@@ -1,0 +1,107 @@
+"""Command line interface: ``cvxdual scenes``, ``cvxdual solve``, ``cvxdual study ...``.
+
+Errors of cvxdual print one line (``cvxdual: error: ...``) and exit with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import CvxdualError
+
+
+def _fmt(v, spec=".4g"):
+    return "-" if v is None else format(v, spec)
+
+
+def human_summary(sol, written=()) -> str:
+    s = sol.summary()
+    L, S = sol.scene.units
+    c, r, t = s["contact"], s["residuals"], s["timings"]
+    lines = [
+        f"scene {s['scene']}, {s['triangulation']}, level {s['level']}: {s['n_pieces']} pieces, "
+        f"{s['n_stress_unknowns']} stress unknowns, {s['n_dofs']} dofs, {s['n_contact_pairs']} contact pairs",
+        f"solver {s['solver']}: {s['status']} in {s['iterations']} iterations; time {t['total']:.2f} s "
+        f"(mesh {t['mesh']:.2f}, assemble {t['assemble']:.2f}, build {t['build']:.2f}, "
+        f"solve {t['solve']:.2f}, recover {t['recover']:.2f})",
+        f"contact: {c['n_active']} active pairs, x in [{_fmt(c['x_min'])}, {_fmt(c['x_max'])}] {L}, "
+        f"max pressure {_fmt(c['max_pressure'])} {S}, total force {_fmt(c['total_force'])} {S}*{L}",
+        f"residuals: equilibrium {r['equilibrium']:.1e}, constitutive {r['constitutive']:.1e}, "
+        f"complementarity {r['complementarity']:.1e}; duality gap {s['duality_gap']:.1e}",
+    ]
+    if s["exact"] and s["exact"].get("kind") == "hertz":
+        e = s["exact"]
+        lines.append(f"Hertz: a = {e['a']:.4g} {L}, p0 = {e['p0']:.4g} {S}")
+    if s["error"]:
+        e = s["error"]
+        lines.append(f"error against the exact stress: L2 {e['l2']:.3e} (relative {e['l2_rel']:.2e}), "
+                     f"energy relative {e['energy_rel']:.2e}")
+    if written:
+        lines.append(f"wrote {Path(written[0]).parent}/: " + ", ".join(Path(w).name for w in written))
+    return "\n".join(lines)
+
+
+def _cmd_scenes(args) -> int:
+    from .scenefile import builtin_scenes
+    for name, desc in builtin_scenes().items():
+        print(f"{name:20s} {desc}")
+    return 0
+
+
+def _cmd_solve(args) -> int:
+    from .output import check_writable, write_outputs
+    from .scenefile import load_scene, parse_assignment
+    from .solution import solve
+    from .solvers import resolve_solver
+    from .triangulation import check_triangulation
+
+    scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])
+    solver = resolve_solver(args.solver)
+    check_triangulation(args.triangulation)
+    out = None if args.no_output else Path(args.out or Path("out") / scene.name)
+    if out is not None:
+        check_writable(out)  # fail before the work, and create nothing until there are results
+    sol = solve(scene, args.triangulation, args.level, solver)
+    written = write_outputs(sol, out, plots=not args.no_plots) if out is not None else []
+    print(human_summary(sol, written))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
+                                "contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("scenes", help="list the built-in scenes").set_defaults(func=_cmd_scenes)
+    s = sub.add_parser("solve", help="solve a scene and write its outputs")
+    s.add_argument("--scene", default="hertz", help="built-in scene name or path to a .toml file (default: hertz)")
+    s.add_argument("--triangulation", default="type1", help="type1 (Haslinger-Hlavacek) or type2 "
+                   "(Hlavacek-Krizek) (default: type1)")
+    s.add_argument("--level", type=int, default=None, help="mesh level, h halves per level (default: the scene's)")
+    s.add_argument("--solver", default="CLARABEL", help="CVXPY solver name (default: CLARABEL)")
+    s.add_argument("--out", default=None, help="output directory (default: out/<scene>)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene value, e.g. --set mesh.grading=4 (repeatable)")
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
+    s.set_defaults(func=_cmd_solve)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except CvxdualError as e:
+        msg = " ".join(str(e).split())
+        print(f"cvxdual: error: {msg}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("cvxdual: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

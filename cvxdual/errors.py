@@ -1,0 +1,43 @@
+"""Exceptions of cvxdual.
+
+Every error the package raises on purpose is a :class:`CvxdualError`. The message names the
+problem and how to fix it; the CLI prints it as one line and exits non-zero.
+"""
+
+from __future__ import annotations
+
+
+class CvxdualError(Exception):
+    """Base class of all errors raised by cvxdual."""
+
+
+class SceneError(CvxdualError, ValueError):
+    """The scene (or its TOML file) is invalid: bad numbers, unknown keys, bad geometry."""
+
+
+class MeshError(CvxdualError, ValueError):
+    """The mesh cannot be built or is invalid (inverted elements, misaligned contact pairs)."""
+
+
+class UnbalancedLoadError(CvxdualError):
+    """The loads do work on a rigid motion that keeps both bodies in contact."""
+
+
+class NoAdmissibleStressError(CvxdualError):
+    """No statically admissible stress field exists (e.g. a body is pulled away from contact)."""
+
+
+class SolverError(CvxdualError):
+    """The QP solver did not return an optimal solution (infeasible, inaccurate, max iterations)."""
+
+
+class UnknownSolverError(CvxdualError, ValueError):
+    """The requested solver is not known or not installed."""
+
+
+class OutputError(CvxdualError, OSError):
+    """An output file or directory cannot be written."""
+
+
+class AccuracyError(CvxdualError):
+    """A solution failed the package's own accuracy checks (residuals above the promised tolerances)."""

@@ -1,0 +1,130 @@
+"""PNG plots of a solution: stress maps, the deformed mesh and the contact pressure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
+
+from .output import atomic_path, nearest_node_values, piece_outlines  # noqa: E402
+
+MAX_EDGES = 60000  # above this, the deformed plot shows colours instead of every edge
+
+
+def _polys(sol, scale: float = 0.0):
+    """Outlines of all pieces (triangles, then curved pieces) and their piece indices,
+    displaced by ``scale`` times the displacement."""
+    p = sol.system.pieces
+    tri = p.tri_vertices
+    disp = sol.displacement
+    if scale:
+        tri = tri + scale * disp[p.nodes[p.tri_piece]]
+    polys = list(tri)
+    ids = list(p.tri_piece)
+    if len(p.slabs):
+        outl = piece_outlines(p)
+        pid = np.unique(p.slabs.piece)
+        if scale:
+            outl = [o + scale * nearest_node_values(sol, o, np.full(len(o), p.body[i]), disp)
+                    for o, i in zip(outl, pid)]
+        polys += outl
+        ids += list(pid)
+    return polys, np.asarray(ids)
+
+
+def _figsize(sol, panels: int = 1) -> tuple[float, float]:
+    pts = sol.mesh.points
+    w, h = np.ptp(pts[:, 0]), np.ptp(pts[:, 1])
+    aspect = min(max(h / w, 0.3), 2.5)
+    return (min(6.0 * panels, 14.0), 1.0 + min(6.0 * panels, 14.0) / panels * aspect * 0.85)
+
+
+def _save(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    return path
+
+
+def _units(sol):
+    return sol.scene.units
+
+
+def plot_stress(sol, path: Path) -> Path:
+    L, S = _units(sol)
+    t = sol.stress
+    tau = np.sqrt(((t[:, 0] - t[:, 1]) / 2) ** 2 + t[:, 2] ** 2)
+    polys, ids = _polys(sol)
+    fig, axes = plt.subplots(1, 2, figsize=_figsize(sol, 2), constrained_layout=True)
+    for ax, val, title in ((axes[0], t[:, 1], "s22 (contact direction)"), (axes[1], tau, "max shear")):
+        pc = PolyCollection(polys, array=val[ids], cmap="viridis", edgecolors="face", linewidths=0.1)
+        ax.add_collection(pc)
+        ax.autoscale_view()
+        ax.set_aspect("equal")
+        ax.set_title(f"{title} [{S}]")
+        ax.set_xlabel(f"x [{L}]")
+        fig.colorbar(pc, ax=ax, shrink=0.8)
+    fig.suptitle(f"{sol.scene.name}, {sol.triangulation}, level {sol.level}: {len(t)} pieces")
+    return _save(fig, path)
+
+
+def deformation_scale(sol) -> float:
+    u = np.abs(sol.displacement).max()
+    return 0.05 * sol.scene.length_scale / u if u > 0 else 1.0
+
+
+def plot_deformed(sol, path: Path) -> Path:
+    L, _ = _units(sol)
+    k = deformation_scale(sol)
+    pts = sol.mesh.points
+    disp = sol.displacement
+    polys, ids = _polys(sol, k)
+    fig, ax = plt.subplots(figsize=_figsize(sol), constrained_layout=True)
+    if len(polys) * 3 <= MAX_EDGES:
+        ax.add_collection(PolyCollection(polys, facecolors="none", edgecolors="k", linewidths=0.3))
+    else:
+        mag = np.linalg.norm(disp, axis=1)
+        pc = PolyCollection(polys, array=mag[sol.system.pieces.nodes[ids, 0]], cmap="magma",
+                            edgecolors="face", linewidths=0.0)
+        ax.add_collection(pc)
+        fig.colorbar(pc, ax=ax, shrink=0.8, label=f"|u| [{L}]")
+    # undeformed outline of the bodies for reference
+    for bm in sol.mesh.bodies:
+        ring = np.concatenate([bm.side_nodes("face"), bm.side_nodes("right"),
+                               bm.side_nodes("far")[::-1], bm.side_nodes("left")[::-1]])
+        xy = pts[ring]
+        ax.add_collection(LineCollection([xy], colors="tab:blue", linewidths=0.8, linestyles="--"))
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_title(f"deformed mesh, displacements x {k:.3g} (dashed: undeformed)")
+    ax.set_xlabel(f"x [{L}]")
+    return _save(fig, path)
+
+
+def plot_pressure(sol, path: Path) -> Path:
+    L, S = _units(sol)
+    c = sol.contact
+    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    ax.plot(c["x"], c["pressure"], "o-", ms=3, lw=1, label="cvxdual (nodal force / tributary length)")
+    if sol.exact is not None:
+        from .exact import exact_field
+        ex = exact_field(sol.scene)
+        xs = np.linspace(c["x"].min(), c["x"].max(), 2001)
+        label = "Hertz" if sol.exact.get("kind") == "hertz" else "exact"
+        ax.plot(xs, ex.pressure(xs), "k-", lw=1, label=label)
+    ax.set_xlabel(f"x [{L}]")
+    ax.set_ylabel(f"contact pressure [{S}]")
+    ax.set_title(f"{sol.scene.name}: {c['n_active']} active pairs of {len(c['x'])}")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_all(sol, out: Path) -> list[Path]:
+    return [plot_stress(sol, out / "stress.png"), plot_deformed(sol, out / "deformed.png"),
+            plot_pressure(sol, out / "pressure.png")]

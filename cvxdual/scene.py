@@ -1,0 +1,326 @@
+"""The scene model: two bodies, their boundary parts, loads, the gap and the exact field.
+
+A body is the region between its contact *face* ``y = f(x)`` (a :mod:`~cvxdual.profiles`
+curve) and a straight *far* side ``y = far``, for ``x`` in ``[x0, x1]``: the upper body
+(the paper's ``Omega'``) lies above its face, the lower body (``Omega''``) below. Its four
+sides are named ``face``, ``far``, ``left`` (``x = x0``) and ``right`` (``x = x1``).
+
+Boundary parts (a scene declares only those it has; undeclared boundary is traction free):
+
+- ``clamped``: ``u = 0`` (the paper's ``Gamma_u``);
+- ``sliding``: normal displacement zero, tangential traction zero (``Gamma_0``; axis-aligned
+  sides only: ``u_x = 0`` on ``left``/``right``, ``u_y = 0`` on ``far``);
+- ``traction``: a prescribed traction ``P`` (``Gamma_tau``): ``uniform`` (a constant vector)
+  or ``exact`` (``sigma* . n`` of the scene's exact field).
+
+The candidate contact interval ``[a, b]`` (``Gamma_K``) lies in both bodies' ``x`` ranges;
+the initial gap is ``eps(x) = f'(x) - f''(x) + g(x)`` with ``g`` an optional gap profile
+(flat faces with ``g(x) = x^2 / (2R)`` are the linearised Hertz geometry).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from .errors import SceneError
+from .materials import Material
+from .profiles import Flat, Profile
+
+SIDES = ("face", "far", "left", "right")
+PART_KINDS = ("clamped", "sliding", "traction")
+POSITIONS = ("upper", "lower")
+
+
+def _pair(value, what: str) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{what} must be a pair of numbers [lo, hi], got {value!r}") from None
+    if not (np.isfinite(a) and np.isfinite(b)):
+        raise SceneError(f"{what} must be finite, got {value!r}")
+    return a, b
+
+
+@dataclass(frozen=True)
+class Traction:
+    """A prescribed surface traction: ``uniform`` with ``value = (Px, Py)``, or ``exact``."""
+
+    kind: str = "uniform"
+    value: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self):
+        if self.kind not in ("uniform", "exact"):
+            raise SceneError(f"traction kind must be 'uniform' or 'exact', got {self.kind!r}")
+        object.__setattr__(self, "value", _pair(self.value, "traction value"))
+
+
+@dataclass(frozen=True)
+class BoundaryPart:
+    """A support or load on one side of a body, optionally on a sub-interval of that side
+    (an ``x`` interval on ``face``/``far``, a ``y`` interval on ``left``/``right``)."""
+
+    on: str
+    kind: str
+    traction: Traction | None = None
+    interval: tuple[float, float] | None = None
+    name: str = ""
+
+    def __post_init__(self):
+        if self.on not in SIDES:
+            raise SceneError(f"boundary part {self.name!r}: 'on' must be one of {SIDES}, got {self.on!r}")
+        if self.kind not in PART_KINDS:
+            raise SceneError(f"boundary part {self.name!r}: kind must be one of {PART_KINDS}, got {self.kind!r}")
+        if (self.kind == "traction") != (self.traction is not None):
+            raise SceneError(f"boundary part {self.name!r}: a traction part needs a 'traction' "
+                             "(and only traction parts have one)")
+        if self.interval is not None:
+            lo, hi = _pair(self.interval, f"boundary part {self.name!r} interval")
+            if not lo < hi:
+                raise SceneError(f"boundary part {self.name!r}: interval must have lo < hi, got {self.interval}")
+            object.__setattr__(self, "interval", (lo, hi))
+
+
+@dataclass(frozen=True)
+class Body:
+    """One elastic body. ``layers`` is the number of element layers at mesh level 0 and
+    ``focus_depth`` the depth below the face over which the layers are graded finest."""
+
+    name: str
+    position: str
+    x_range: tuple[float, float]
+    far: float
+    face: Profile
+    material: Material
+    boundary: tuple[BoundaryPart, ...] = ()
+    body_force: tuple[float, float] = (0.0, 0.0)
+    layers: int = 4
+    focus_depth: float | None = None
+
+    def __post_init__(self):
+        if self.position not in POSITIONS:
+            raise SceneError(f"body {self.name!r}: position must be 'upper' or 'lower', got {self.position!r}")
+        x0, x1 = _pair(self.x_range, f"body {self.name!r} x range")
+        if not x0 < x1:
+            raise SceneError(f"body {self.name!r}: x range must have x0 < x1, got {self.x_range}")
+        object.__setattr__(self, "x_range", (x0, x1))
+        object.__setattr__(self, "body_force", _pair(self.body_force, f"body {self.name!r} body_force"))
+        far = float(self.far)
+        if not np.isfinite(far):
+            raise SceneError(f"body {self.name!r}: far must be finite, got {self.far!r}")
+        object.__setattr__(self, "far", far)
+        if int(self.layers) != self.layers or self.layers < 1:
+            raise SceneError(f"body {self.name!r}: layers must be a positive integer, got {self.layers!r}")
+        lo, hi = self.face.domain()
+        if x0 < lo or x1 > hi:
+            raise SceneError(f"body {self.name!r}: its face ({self.face.kind}) is a graph only on "
+                             f"[{lo:g}, {hi:g}], not on the body's x range [{x0:g}, {x1:g}]; "
+                             "shrink the body or enlarge the arc")
+        # The far side must not touch the face: sample the face densely (the closed set of
+        # profile kinds has at most a few oscillations per wavelength, resolved by 4001 points).
+        xs = np.linspace(x0, x1, 4001)
+        fx = self.face.value(xs)
+        if not np.all(np.isfinite(fx)):
+            raise SceneError(f"body {self.name!r}: its face is not finite on [{x0:g}, {x1:g}]")
+        gap = (far - fx) if self.position == "upper" else (fx - far)
+        if gap.min() <= 0:
+            raise SceneError(f"body {self.name!r}: the face crosses the far side y = {far:g}; "
+                             f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
+        if self.focus_depth is not None and not (np.isfinite(self.focus_depth) and self.focus_depth > 0):
+            raise SceneError(f"body {self.name!r}: focus_depth must be positive, got {self.focus_depth!r}")
+        for part in self.boundary:
+            if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
+                raise SceneError(f"body {self.name!r}: a {part.kind} support on a curved face is not "
+                                 "axis-aligned; put supports on flat sides")
+
+    @property
+    def sign(self) -> float:
+        """+1 for the upper body (far side above the face), -1 for the lower body."""
+        return 1.0 if self.position == "upper" else -1.0
+
+    def height(self, x) -> np.ndarray:
+        return np.abs(self.far - self.face.value(x))
+
+
+@dataclass(frozen=True)
+class ExactSpec:
+    """The scene's closed-form ``lam*``: ``uniform`` (a constant Voigt stress, both bodies)
+    or ``hertz`` (linearised Hertz line contact of radius ``R`` under ``load`` per unit
+    length of the full contact, centred at ``xc`` on the face ``y = 0``)."""
+
+    kind: str
+    stress: tuple[float, float, float] | None = None
+    R: float | None = None
+    load: float | None = None
+    xc: float = 0.0
+
+    def __post_init__(self):
+        if self.kind == "uniform":
+            if self.stress is None or len(self.stress) != 3:
+                raise SceneError("exact field 'uniform' needs stress = [s11, s22, s12]")
+            s = tuple(float(v) for v in self.stress)
+            if not np.all(np.isfinite(s)):
+                raise SceneError("exact field 'uniform': stress must be finite")
+            object.__setattr__(self, "stress", s)
+        elif self.kind == "hertz":
+            for name in ("R", "load"):
+                v = getattr(self, name)
+                if v is None or not np.isfinite(float(v)) or float(v) <= 0:
+                    raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
+                object.__setattr__(self, name, float(v))
+        else:
+            raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {self.kind!r}")
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """Level-0 mesh: ``columns`` element columns across all bodies, graded so that elements
+    are ``grading`` times larger far from ``focus`` (an x interval) than inside it."""
+
+    columns: int = 8
+    focus: tuple[float, float] | None = None
+    grading: float = 1.0
+    default_level: int = 3
+
+    def __post_init__(self):
+        if int(self.columns) != self.columns or self.columns < 1:
+            raise SceneError(f"mesh columns must be a positive integer, got {self.columns!r}")
+        if not (np.isfinite(self.grading) and self.grading >= 1):
+            raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {self.grading!r}")
+        if int(self.default_level) != self.default_level or self.default_level < 0:
+            raise SceneError(f"mesh default_level must be a non-negative integer, got {self.default_level!r}")
+        if self.focus is not None:
+            lo, hi = _pair(self.focus, "mesh focus")
+            if not lo <= hi:
+                raise SceneError(f"mesh focus must have lo <= hi, got {self.focus}")
+            object.__setattr__(self, "focus", (lo, hi))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Two bodies in (potential) frictionless contact. ``bodies[0]`` is the upper body."""
+
+    name: str
+    bodies: tuple[Body, Body]
+    description: str = ""
+    contact: tuple[float, float] | None = None
+    gap: Profile | None = None
+    exact: ExactSpec | None = None
+    mesh: MeshSpec = field(default_factory=MeshSpec)
+    units: tuple[str, str] = ("m", "Pa")
+
+    def __post_init__(self):
+        if len(self.bodies) != 2:
+            raise SceneError(f"a scene has exactly two bodies, got {len(self.bodies)}")
+        up, lo = self.bodies
+        if up.position == lo.position:
+            raise SceneError("one body must be 'upper' and the other 'lower'")
+        if up.position == "lower":
+            object.__setattr__(self, "bodies", (lo, up))
+            up, lo = lo, up
+        if up.material.plane != lo.material.plane:
+            raise SceneError("both bodies must be in the same plane state (strain or stress)")
+        ov = (max(up.x_range[0], lo.x_range[0]), min(up.x_range[1], lo.x_range[1]))
+        if not ov[0] < ov[1]:
+            raise SceneError(f"the bodies' x ranges {up.x_range} and {lo.x_range} do not overlap; "
+                             "there is no candidate contact interval")
+        a, b = ov if self.contact is None else _pair(self.contact, "contact interval")
+        if not (ov[0] - 1e-12 * abs(ov[1] - ov[0]) <= a < b <= ov[1] + 1e-12 * abs(ov[1] - ov[0])):
+            raise SceneError(f"the contact interval [{a:g}, {b:g}] must lie in both bodies' x ranges "
+                             f"(overlap [{ov[0]:g}, {ov[1]:g}])")
+        object.__setattr__(self, "contact", (a, b))
+        eps = self.gap_at(np.linspace(a, b, 2001))
+        if not np.all(np.isfinite(eps)):
+            raise SceneError("the initial gap is not finite on the contact interval")
+        for body in self.bodies:
+            for part in body.boundary:
+                if part.on == "face" and part.kind != "traction":
+                    lo_, hi_ = part.interval or body.x_range
+                    if lo_ < b and hi_ > a:
+                        raise SceneError(f"body {body.name!r}: support {part.name!r} overlaps the contact "
+                                         f"interval [{a:g}, {b:g}]; a contact face cannot be supported")
+        if self.exact is not None and self.exact.kind == "hertz":
+            if not (up.face.is_flat() and lo.face.is_flat()):
+                raise SceneError("the 'hertz' exact field is for the linearised geometry: both faces flat")
+            if self.gap is not None:
+                raise SceneError("with exact = 'hertz' the gap x^2/(2R) follows from exact.R; "
+                                 "do not declare a separate gap")
+            for body in self.bodies:
+                if body.material.E is None:
+                    raise SceneError("the 'hertz' exact field needs isotropic materials (E, nu)")
+
+    @property
+    def upper(self) -> Body:
+        return self.bodies[0]
+
+    @property
+    def lower(self) -> Body:
+        return self.bodies[1]
+
+    @property
+    def gap_profile(self) -> Profile:
+        """The profile ``g`` added to ``f' - f''`` (from ``exact.R`` for a Hertz scene)."""
+        if self.exact is not None and self.exact.kind == "hertz":
+            from .profiles import Parabola
+            return Parabola(R=self.exact.R, xc=self.exact.xc)
+        return self.gap if self.gap is not None else Flat(0.0)
+
+    def gap_at(self, x) -> np.ndarray:
+        """Initial gap ``eps(x) = f'(x) - f''(x) + g(x)``."""
+        x = np.asarray(x, float)
+        return self.upper.face.value(x) - self.lower.face.value(x) + self.gap_profile.value(x)
+
+    @property
+    def x_extent(self) -> tuple[float, float]:
+        return (min(b.x_range[0] for b in self.bodies), max(b.x_range[1] for b in self.bodies))
+
+    @property
+    def length_scale(self) -> float:
+        """A representative length (largest body dimension), used for scaling and tolerances."""
+        x0, x1 = self.x_extent
+        heights = [float(np.max(b.height(np.linspace(*b.x_range, 101)))) for b in self.bodies]
+        return max(x1 - x0, *heights)
+
+    def with_(self, **changes) -> "Scene":
+        """A copy with some fields replaced (validated again)."""
+        return replace(self, **changes)
+
+
+def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, str]) -> Scene:
+    """The same scene in other units: lengths multiplied by ``length``, stresses by ``stress``
+    (forces per unit thickness by ``length * stress``, body forces by ``stress / length``)."""
+    from .materials import Material
+    from .profiles import Profile
+
+    def prof(p: Profile | None):
+        if p is None:
+            return None
+        return replace(p, **{f.name: getattr(p, f.name) * length for f in fields(p)})
+
+    def mat(m: Material) -> Material:
+        return Material(C=tuple(tuple(v * stress for v in row) for row in m.C),
+                        E=None if m.E is None else m.E * stress, nu=m.nu, plane=m.plane,
+                        description=m.description)
+
+    def ival(iv):
+        return None if iv is None else (iv[0] * length, iv[1] * length)
+
+    def part(p: BoundaryPart) -> BoundaryPart:
+        tr = p.traction
+        if tr is not None and tr.kind == "uniform":
+            tr = replace(tr, value=(tr.value[0] * stress, tr.value[1] * stress))
+        return replace(p, traction=tr, interval=ival(p.interval))
+
+    bodies = tuple(replace(b, x_range=ival(b.x_range), far=b.far * length, face=prof(b.face),
+                           material=mat(b.material), boundary=tuple(part(p) for p in b.boundary),
+                           body_force=(b.body_force[0] * stress / length, b.body_force[1] * stress / length),
+                           focus_depth=None if b.focus_depth is None else b.focus_depth * length)
+                   for b in scene.bodies)
+    ex = scene.exact
+    if ex is not None:
+        ex = replace(ex, stress=None if ex.stress is None else tuple(v * stress for v in ex.stress),
+                     R=None if ex.R is None else ex.R * length,
+                     load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length)
+    return replace(scene, bodies=bodies, contact=ival(scene.contact), gap=prof(scene.gap), exact=ex,
+                   mesh=replace(scene.mesh, focus=ival(scene.mesh.focus)), units=tuple(units))

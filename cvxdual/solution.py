@@ -1,0 +1,206 @@
+"""Solving a scene end to end, and the :class:`Solution` it returns.
+
+``solve(scene)`` meshes, assembles, builds the CVXPY dual, solves it, recovers displacements
+from the multipliers and checks the result: equilibrium and sign of contact forces, the
+constitutive law ``t_P = C_P B_P u_h``, complementarity and the discrete duality gap.
+A result that fails the promised tolerances (:data:`TOLERANCES`) raises
+:class:`~cvxdual.errors.AccuracyError`; it is never returned.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .assembly import System, assemble
+from .dual import DualModel, admissibility
+from .errors import AccuracyError
+from .exact import exact_field
+from .norms import VOIGT_WEIGHT, stress_error
+from .scene import Scene
+from .solvers import resolve_solver
+from .triangulation import check_triangulation, discretize
+
+# What every returned solution satisfies (relative measures, defined in Solution.residuals).
+# Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
+# about 100 on the built-in scenes; first-order solvers may fail them and are then rejected.
+TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6}
+
+ACTIVE_TOL = 1e-6  # a pair is active when its force exceeds this fraction of the largest
+
+
+@dataclass
+class Solution:
+    """A solved scene. Arrays: ``stress`` ``(n_pieces, 3)``, ``displacement`` ``(n_nodes, 2)``,
+    contact arrays ``(n_pairs,)`` ordered by ``x``."""
+
+    scene: Scene
+    triangulation: str
+    level: int
+    system: System
+    stress: np.ndarray
+    displacement: np.ndarray
+    solver: dict
+    timings: dict
+    objective: float = 0.0
+    duality_gap: float = 0.0
+    residuals: dict = field(default_factory=dict)
+    contact: dict = field(default_factory=dict)
+    exact: dict | None = None
+    error: dict | None = None
+
+    @property
+    def mesh(self):
+        return self.system.mesh
+
+    def summary(self) -> dict:
+        """The ``summary.json`` contract (README, "Outputs")."""
+        s = self.system
+        c = self.contact
+        return {
+            "scene": self.scene.name,
+            "triangulation": self.triangulation,
+            "level": self.level,
+            "units": {"length": self.scene.units[0], "stress": self.scene.units[1]},
+            "n_pieces": s.n_pieces,
+            "piece_kinds": s.pieces.counts(),
+            "n_stress_unknowns": 3 * s.n_pieces,
+            "n_dofs": s.n_dofs,
+            "n_free_dofs": s.n_r,
+            "n_contact_pairs": len(s.jb),
+            "h": s.mesh.h,
+            "h_min": s.mesh.h_min,
+            "solver": self.solver.get("solver"),
+            "status": self.solver.get("status"),
+            "iterations": self.solver.get("iterations"),
+            "objective": self.objective,
+            "duality_gap": self.duality_gap,
+            "load_imbalance": s.load_imbalance,
+            "residuals": dict(self.residuals),
+            "contact": {k: c[k] for k in ("n_active", "x_min", "x_max", "max_pressure", "total_force")},
+            "exact": self.exact,
+            "error": self.error,
+            "timings": dict(self.timings),
+        }
+
+
+def contact_quantities(system: System, t: np.ndarray, u: np.ndarray) -> dict:
+    """Nodal contact forces, pressures, gaps and the active set."""
+    R, _ = admissibility(system, t)
+    force = -R[system.jb]
+    up, lo = system.mesh.pairs.T
+    rel = u[2 * lo + 1] - u[2 * up + 1]
+    pressure = force / system.width
+    fmax = float(force.max()) if len(force) else 0.0
+    active = force > ACTIVE_TOL * fmax if fmax > 0 else np.zeros(len(force), bool)
+    xs = system.mesh.pair_x[active]
+    return {
+        "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
+        "force": force, "pressure": pressure, "active": active,
+        "reaction": R[system.ja],  # y force on the upper body: +force (action = reaction)
+        "n_active": int(active.sum()),
+        "x_min": float(xs.min()) if len(xs) else None,
+        "x_max": float(xs.max()) if len(xs) else None,
+        "max_pressure": float(pressure.max()) if len(pressure) else 0.0,
+        "total_force": float(force.sum()),
+    }
+
+
+def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict) -> dict:
+    """Relative residuals of a dual solution ``t`` with recovered displacements ``u``.
+
+    - equilibrium: largest violation of ``(T^T R)_j = 0`` (``j`` in ``J0``) and
+      ``(T^T R)_m <= 0`` (``m`` in ``J-``), over the largest term of ``Z^T (|E||t| + |f|)``;
+    - constitutive: ``||t - C B u||_0 / ||t||_0``;
+    - complementarity: ``sum |F_k s_k| / (sum |F_k| * delta)``, ``s_k = eps_k - (u''_y - u'_y)``,
+      ``delta`` the largest displacement or gap;
+    - penetration: ``max(0, -s_k) / delta``.
+    """
+    R, scale = admissibility(system, t)
+    Ry = system.T().T @ R
+    viol = np.abs(Ry)
+    viol[system.jb] = np.maximum(Ry[system.jb], 0.0)
+    eq = float(viol.max() / max(scale.max(), 1e-300)) if len(viol) else 0.0
+    tu = system.stresses_from_displacement(u)
+    a = system.pieces.area[:, None]
+    num = np.sqrt(np.sum(a * VOIGT_WEIGHT * (t - tu) ** 2))
+    den = np.sqrt(np.sum(a * VOIGT_WEIGHT * t**2))
+    cons = float(num / den) if den > 0 else float(num)
+    s = contact["gap"] - contact["relative_displacement"]
+    delta = max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), 1e-300)
+    F = contact["force"]
+    fsum = float(np.abs(F).sum())
+    comp = float(np.sum(np.abs(F * s)) / (fsum * delta)) if fsum > 0 else 0.0
+    pen = float(max(0.0, -s.min()) / delta) if len(s) else 0.0
+    return {"equilibrium": eq, "constitutive": cons, "complementarity": comp, "penetration": pen}
+
+
+def duality_gap(system: System, t: np.ndarray, u: np.ndarray, objective: float) -> float:
+    """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy (MATH.md section 2)."""
+    tv = t.ravel()
+    energy = 0.5 * float(tv @ (system.Ah @ tv))
+    val = system.energy(u) + float(system.f @ system.q0) + objective
+    return abs(val) / max(energy, abs(objective), 1e-300)
+
+
+def build_model(scene: Scene, triangulation: str = "type1", level: int | None = None) -> DualModel:
+    """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it."""
+    mesh, pieces, ties = discretize(scene, check_triangulation(triangulation), level)
+    return DualModel(assemble(mesh, pieces, ties))
+
+
+def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
+          solver: str | None = None, check: bool = True, **solver_options) -> Solution:
+    """Solve the discrete dual problem of ``scene``; see the module docstring."""
+    solver = resolve_solver(solver)
+    triangulation = check_triangulation(triangulation)
+    level = scene.mesh.default_level if level is None else level
+    timings = {}
+    t0 = time.perf_counter()
+    mesh, pieces, ties = discretize(scene, triangulation, level)
+    t1 = time.perf_counter()
+    system = assemble(mesh, pieces, ties)
+    t2 = time.perf_counter()
+    model = DualModel(system)
+    t3 = time.perf_counter()
+    info = model.solve(solver, **solver_options)
+    t4 = time.perf_counter()
+    sol = recover(model, triangulation, level, info, check)
+    t5 = time.perf_counter()
+    # CVXPY canonicalises inside solve(); count that as building the problem
+    compile_time = float(info.get("compile_time") or 0.0)
+    timings.update(mesh=t1 - t0, assemble=t2 - t1, build=t3 - t2 + compile_time,
+                   solve=t4 - t3 - compile_time, recover=t5 - t4, total=t5 - t0)
+    sol.timings = timings
+    return sol
+
+
+def recover(model: DualModel, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
+    """Stresses, displacements, contact data, residuals, gap and errors from a solved model."""
+    system = model.system
+    scene = system.mesh.scene
+    t = model.stresses()
+    u = model.displacements()
+    contact = contact_quantities(system, t, u)
+    res = residuals(system, t, u, contact)
+    objective = model.objective_value(t)
+    gap = duality_gap(system, t, u, objective)
+    exact = exact_field(scene)
+    error = stress_error(system, t, exact.stress) if exact is not None else None
+    sol = Solution(scene=scene, triangulation=triangulation, level=level, system=system, stress=t,
+                   displacement=u.reshape(-1, 2), solver=info, timings={}, objective=objective,
+                   duality_gap=gap, residuals=res, contact=contact,
+                   exact=exact.data() if exact is not None else None, error=error)
+    if check and not model.extra:
+        check_solution(sol)
+    return sol
+
+
+def check_solution(sol: Solution) -> None:
+    bad = {k: v for k, v in sol.residuals.items() if v > TOLERANCES[k]}
+    if bad:
+        txt = ", ".join(f"{k} {v:.2e} > {TOLERANCES[k]:.0e}" for k, v in bad.items())
+        raise AccuracyError(f"solver {sol.solver.get('solver')} returned 'optimal' but the solution fails "
+                            f"the accuracy checks ({txt}); try CLARABEL or a coarser mesh")

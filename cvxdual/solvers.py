@@ -1,0 +1,70 @@
+"""Solver names, options and the mapping of CVXPY statuses to cvxdual exceptions."""
+
+from __future__ import annotations
+
+import time
+
+import cvxpy as cp
+
+from .errors import SolverError, UnknownSolverError
+
+DEFAULT_SOLVER = "CLARABEL"
+
+# Options that make each solver reach the accuracy the package promises (see README).
+# Clarabel's defaults (1e-8 gaps and feasibility) already do; first-order solvers need
+# tighter tolerances and more iterations to get anywhere near.
+SOLVER_OPTIONS: dict[str, dict] = {
+    "CLARABEL": {},
+    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iter": 200000, "polishing": True},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000},
+}
+
+
+def resolve_solver(name: str | None) -> str:
+    """Normalise a solver name; raise :class:`UnknownSolverError` naming the installed ones."""
+    name = DEFAULT_SOLVER if name is None else str(name).upper()
+    installed = cp.installed_solvers()
+    if name not in installed:
+        raise UnknownSolverError(
+            f"unknown or uninstalled solver {name!r}; installed CVXPY solvers: {', '.join(sorted(installed))}"
+            " (or 'fast' for the active-set path)")
+    return name
+
+
+_ADVICE = {
+    cp.INFEASIBLE: "no statically admissible stress field exists: check that the loads push the bodies "
+                   "together and are balanced",
+    cp.INFEASIBLE_INACCURATE: "the solver suspects infeasibility but is not sure: check the loads, or try "
+                              "a finer mesh or another solver",
+    cp.UNBOUNDED: "the problem is unbounded: a body can move freely; add supports",
+    cp.UNBOUNDED_INACCURATE: "the problem looks unbounded: a body can move freely; add supports",
+    cp.OPTIMAL_INACCURATE: "the solver stopped before reaching its tolerances (inaccurate); try Clarabel, "
+                           "a coarser mesh, or more iterations",
+    cp.USER_LIMIT: "the solver hit an iteration or time limit; raise max_iter or use Clarabel",
+}
+
+
+def solve_problem(problem: cp.Problem, solver: str, what: str, **options) -> dict:
+    """Solve ``problem``; return timing and statistics, or raise :class:`SolverError`."""
+    opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
+    t0 = time.perf_counter()
+    try:
+        problem.solve(solver=solver, **opts)
+    except cp.error.SolverError as e:
+        raise SolverError(f"{what}: solver {solver} failed ({str(e).splitlines()[0] if str(e) else 'no message'}); "
+                          "try another solver (e.g. CLARABEL) or a coarser mesh") from None
+    wall = time.perf_counter() - t0
+    status = problem.status
+    if status != cp.OPTIMAL:
+        advice = _ADVICE.get(status, "try another solver")
+        raise SolverError(f"{what}: solver {solver} returned status '{status}': {advice}")
+    stats = problem.solver_stats
+    return {
+        "status": status,
+        "solver": solver,
+        "iterations": getattr(stats, "num_iters", None),
+        "solve_time": getattr(stats, "solve_time", None),
+        "setup_time": getattr(stats, "setup_time", None),
+        "compile_time": getattr(problem, "compilation_time", None),
+        "wall": wall,
+    }

@@ -1,0 +1,125 @@
+"""The command line: `cvxdual scenes`, `cvxdual solve`, outputs and bad input."""
+
+import json
+
+import meshio
+import numpy as np
+import pandas as pd
+import pytest
+
+from cvxdual.cli import main
+from cvxdual.scenefile import builtin_names
+
+SUMMARY_KEYS = {"scene", "triangulation", "level", "n_pieces", "n_stress_unknowns", "n_dofs",
+                "n_contact_pairs", "solver", "status", "objective", "duality_gap", "residuals", "contact",
+                "exact", "error", "timings"}
+
+
+def test_scenes_lists_builtins(capsys):
+    assert main(["scenes"]) == 0
+    out = capsys.readouterr().out
+    for name in ("patch", "hertz", "blocks"):
+        assert name in out
+    assert len(out.strip().splitlines()) == len(builtin_names())
+
+
+def test_solve_writes_the_output_contract(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["solve", "--scene", "hertz", "--level", "1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "optimal" in text and "Hertz" in text
+    s = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(s)
+    assert s["status"] == "optimal" and s["scene"] == "hertz" and s["level"] == 1
+    assert set(s["residuals"]) >= {"equilibrium", "constitutive", "complementarity"}
+    assert set(s["contact"]) == {"n_active", "x_min", "x_max", "max_pressure", "total_force"}
+    assert set(s["timings"]) == {"mesh", "assemble", "build", "solve", "recover", "total"}
+    assert {"a", "p0"} <= set(s["exact"]) and {"l2", "l2_rel", "energy", "energy_rel"} <= set(s["error"])
+    c = pd.read_csv(out / "contact.csv")
+    assert list(c.columns[:5]) == ["x", "gap", "relative_displacement", "pressure", "active"]
+    assert len(c) == s["n_contact_pairs"] and c["active"].sum() == s["contact"]["n_active"]
+    m = meshio.read(out / "solution.vtu")
+    assert m.point_data["displacement"].shape == (len(m.points), 3)
+    tri = [b for b in m.cells if b.type == "triangle"]
+    assert sum(len(b.data) for b in tri) == s["n_pieces"]
+    stress = np.concatenate(m.cell_data["stress"])
+    assert stress.shape == (s["n_pieces"], 3)
+    assert np.all(np.concatenate(m.cell_data["piece_kind"]) == 0)
+    for png in ("stress.png", "deformed.png", "pressure.png"):
+        assert (out / png).stat().st_size > 1000
+    assert not list(out.glob(".*"))  # no temporary files left behind
+
+
+def test_set_overrides_a_value(tmp_path, capsys):
+    assert main(["solve", "--scene", "patch", "--level", "0", "--set", "mesh.columns=3",
+                 "--out", str(tmp_path), "--no-plots"]) == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["n_contact_pairs"] >= 4
+
+
+def test_scene_file_with_base(tmp_path, capsys):
+    f = tmp_path / "soft.toml"
+    f.write_text('base = "patch"\nname = "soft"\n[bodies.top.material]\nE = 1000.0\n')
+    assert main(["solve", "--scene", str(f), "--level", "0", "--no-output"]) == 0
+    assert "scene soft" in capsys.readouterr().out
+
+
+def test_existing_file_kept_when_writing_fails(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "o"
+    assert main(["solve", "--scene", "patch", "--level", "0", "--out", str(out), "--no-plots"]) == 0
+    before = (out / "solution.vtu").read_bytes()
+
+    def boom(path, *a, **k):
+        with open(path, "wb") as fh:
+            fh.write(b"half a file")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(meshio, "write", boom)
+    assert main(["solve", "--scene", "patch", "--level", "1", "--out", str(out), "--no-plots"]) == 1
+    assert "No space left" in capsys.readouterr().err
+    assert (out / "solution.vtu").read_bytes() == before  # the old file, not half a new one
+    assert not list(out.glob(".*"))
+
+
+BAD = [
+    (["--set", 'bodies.cylinder.boundary.top.traction={kind="uniform", value=[0.0, -100.0]}'], "unbalanced"),
+    (["--scene", "blocks", "--set", "bodies.lower.boundary.push.traction.value=[0.0, -50.0]"], "pull"),
+    (["--set", "bodies.cylinder.material.nu=0.5"], "Poisson"),
+    (["--set", "bodies.block.material.E=-1.0"], "positive"),
+    (["--set", "bodies.block.material.E=0.0"], "positive"),
+    (["--set", "bodies.block.material.E=nan"], "finite"),
+    (["--set", "exact.R=inf"], "finite"),
+    (["--set", "bodies.block.far=nan"], "finite"),
+    (["--scene", "nosuch"], "unknown scene"),
+    (["--solver", "NOSUCH"], "unknown or uninstalled solver"),
+    (["--triangulation", "type3"], "triangulation"),
+    (["--set", "mesh.colums=3"], "colums"),
+]
+
+
+@pytest.mark.parametrize("args,words", BAD, ids=[b[1] for b in BAD])
+def test_bad_input_one_line_error_nothing_written(tmp_path, capsys, args, words):
+    out = tmp_path / "out"
+    rc = main(["solve", "--level", "0", *args, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert err.startswith("cvxdual: error:") and len(err.strip().splitlines()) == 1
+    assert words.lower() in err.lower()
+    assert not out.exists()
+
+
+def test_unknown_key_in_scene_file(tmp_path, capsys):
+    f = tmp_path / "bad.toml"
+    f.write_text('base = "patch"\n[bodies.top]\nfocus_dpth = 1.0\n')
+    assert main(["solve", "--scene", str(f), "--no-output"]) == 1
+    err = capsys.readouterr().err
+    assert "focus_dpth" in err and "bodies.top" in err
+
+
+def test_unwritable_output(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["solve", "--scene", "patch", "--level", "0", "--out", str(blocker / "sub")]) == 1
+    err = capsys.readouterr().err
+    assert "not a directory" in err
+    assert blocker.read_text() == "x"
