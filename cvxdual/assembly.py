@@ -234,49 +234,72 @@ def _outward_normal(side: str, position: str, d: np.ndarray) -> np.ndarray:
     return -left_normal if up else left_normal
 
 
+def side_quadrature(mesh: Mesh, k: int, part, n_gauss: int = 8):
+    """Gauss points on the part of a side: ``(a, b, x, u, nds)`` with end nodes ``a``, ``b``
+    ``(m,)`` of each stretch, points ``x`` ``(m, g, 2)`` on the *true* boundary, the hat value
+    ``u`` ``(g,)`` of node ``b`` there (``1 - u`` for ``a``) and the outward normal times the
+    arc-length weight ``nds`` ``(m, g, 2)``.
+
+    On the face the stretches are the intervals between face columns and the points lie on
+    the arc ``y = f(x)``: the ``V_h`` trace there is linear in x between the two face nodes
+    (on segments and curved pieces ``v_h`` is extended along y), whatever the triangulation.
+    """
+    bm = mesh.bodies[k]
+    body = bm.body
+    u, w = gauss01(n_gauss)
+    nodes = bm.side_nodes(part.on)
+    a, b = nodes[:-1], nodes[1:]
+    pa, pb = mesh.points[a], mesh.points[b]
+    if part.interval is not None:
+        c = 0 if part.on in ("face", "far") else 1
+        mid = 0.5 * (pa[:, c] + pb[:, c])
+        keep = (mid >= part.interval[0]) & (mid <= part.interval[1])
+        a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
+    if part.on == "face":
+        dx = pb[:, 0] - pa[:, 0]
+        xs = pa[:, :1] + u[None, :] * dx[:, None]
+        x = np.stack([xs, body.face.value(xs)], axis=-1)
+        # outward normal * ds = (f', -1) dx below the upper body, (-f', 1) dx above the lower
+        nds = body.sign * np.stack([body.face.slope(xs), -np.ones_like(xs)], axis=-1)
+        nds = nds * (w[None, :] * dx[:, None])[..., None]
+        return a, b, x, u, nds
+    d = pb - pa
+    x = pa[:, None, :] + u[None, :, None] * d[:, None, :]
+    n = _outward_normal(part.on, body.position, d) * np.linalg.norm(d, axis=1, keepdims=True)
+    return a, b, x, u, n[:, None, :] * w[None, :, None]
+
+
 def load_vector(mesh: Mesh, pieces: Pieces, n_gauss: int = 8) -> np.ndarray:
     """``f_j = L(phi_j)``: body forces over the pieces and tractions along the sides.
 
-    Tractions use ``n_gauss`` Gauss points per edge (degree ``2 n_gauss - 1``: enough for
-    the smooth exact fields of the built-in scenes to machine precision)."""
+    Tractions use ``n_gauss`` Gauss points per boundary stretch (degree ``2 n_gauss - 1``:
+    enough for the smooth exact fields of the built-in scenes to machine precision)."""
     scene = mesh.scene
     f = np.zeros(2 * mesh.n_nodes)
     bf = np.array([b.body_force for b in scene.bodies])[pieces.body]  # (n_p, 2)
     for c in (0, 1):
         np.add.at(f, 2 * pieces.nodes + c, pieces.phi * bf[:, c, None])
-    u, w = gauss01(n_gauss)
     exact = None
     for k, bm in enumerate(mesh.bodies):
         for part in bm.body.boundary:
             if part.kind != "traction":
                 continue
-            nodes = bm.side_nodes(part.on)
-            a, b = nodes[:-1], nodes[1:]
-            pa, pb = mesh.points[a], mesh.points[b]
-            if part.interval is not None:
-                c = 0 if part.on in ("face", "far") else 1
-                mid = 0.5 * (pa[:, c] + pb[:, c])
-                keep = (mid >= part.interval[0]) & (mid <= part.interval[1])
-                a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
-            d = pb - pa
-            ell = np.linalg.norm(d, axis=1)
-            x = pa[:, None, :] + u[None, :, None] * d[:, None, :]  # (m, g, 2)
+            a, b, x, u, nds = side_quadrature(mesh, k, part, n_gauss)
             if part.traction.kind == "uniform":
-                P = np.broadcast_to(np.array(part.traction.value), x.shape)
+                ds = np.linalg.norm(nds, axis=-1, keepdims=True)
+                P = np.array(part.traction.value) * ds  # traction times the length weight
             else:
                 if exact is None:
                     from .exact import exact_field
                     exact = exact_field(scene)
                     if exact is None:
                         raise SceneError(f"body {bm.body.name!r}: traction 'exact' needs an [exact] field in the scene")
-                n = _outward_normal(part.on, bm.body.position, d)
                 s = exact.stress(k, x.reshape(-1, 2)).reshape(x.shape[0], x.shape[1], 3)
-                P = np.stack([s[..., 0] * n[:, None, 0] + s[..., 2] * n[:, None, 1],
-                              s[..., 2] * n[:, None, 0] + s[..., 1] * n[:, None, 1]], axis=-1)
-            wl = ell[:, None] * w[None, :]
+                P = np.stack([s[..., 0] * nds[..., 0] + s[..., 2] * nds[..., 1],
+                              s[..., 2] * nds[..., 0] + s[..., 1] * nds[..., 1]], axis=-1)
             for c in (0, 1):
-                np.add.at(f, 2 * a + c, np.sum(wl * (1 - u)[None, :] * P[..., c], axis=1))
-                np.add.at(f, 2 * b + c, np.sum(wl * u[None, :] * P[..., c], axis=1))
+                np.add.at(f, 2 * a + c, np.sum((1 - u)[None, :] * P[..., c], axis=1))
+                np.add.at(f, 2 * b + c, np.sum(u[None, :] * P[..., c], axis=1))
     if not np.all(np.isfinite(f)):
         raise SceneError("the load vector is not finite; check the loads and the exact field")
     return f

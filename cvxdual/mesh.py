@@ -68,13 +68,16 @@ def graded_points(x0: float, x1: float, n0: int, level: int, focus=None, ratio: 
 
 @dataclass(frozen=True)
 class BodyMesh:
-    """The column mesh of one body. ``columns`` are the x coordinates of its columns and
-    ``eta`` the layer parameters (0 at the face, 1 at the far side)."""
+    """The column mesh of one body. ``columns`` are the x coordinates of its columns,
+    ``eta`` the layer parameters (0 at the face, 1 at the far side) and ``face_y`` the height
+    of the face node of each column (on the face, or on a tangent polygon, see
+    :mod:`~cvxdual.triangulation`)."""
 
     body: Body
     offset: int
     columns: np.ndarray
     eta: np.ndarray
+    face_y: np.ndarray
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -88,7 +91,7 @@ class BodyMesh:
         return len(self.columns) * len(self.eta)
 
     def points(self) -> np.ndarray:
-        f = self.body.face.value(self.columns)
+        f = self.face_y
         y = f[:, None] + (self.body.far - f)[:, None] * self.eta[None, :]
         x = np.broadcast_to(self.columns[:, None], y.shape)
         return np.stack([x.ravel(), y.ravel()], axis=1)
@@ -175,23 +178,37 @@ def column_abscissae(scene: Scene, level: int, extra=()) -> np.ndarray:
     return graded_points(x0, x1, spec.columns, level, spec.focus, spec.grading, required)
 
 
-def build_mesh(scene: Scene, level: int | None = None, extra_columns=()) -> Mesh:
-    """Build the column mesh of ``scene`` at ``level`` (default: the scene's default level)."""
-    level = scene.mesh.default_level if level is None else level
-    if int(level) != level or level < 0:
+def check_level(level) -> int:
+    try:
+        ok = not isinstance(level, bool) and int(level) == level and level >= 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
         raise MeshError(f"mesh level must be a non-negative integer, got {level!r}")
-    cols = column_abscissae(scene, int(level), extra_columns)
+    return int(level)
+
+
+def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | None = None,
+               face_y=(None, None)) -> Mesh:
+    """Build the column mesh of ``scene`` at ``level`` (default: the scene's default level).
+
+    ``columns`` replaces the graded global columns; ``face_y[k]`` (a function of the column
+    abscissae) replaces the face heights of body ``k``'s face nodes.
+    """
+    level = check_level(scene.mesh.default_level if level is None else level)
+    cols = column_abscissae(scene, level) if columns is None else np.asarray(columns, float)
     bms, pts, offset = [], [], 0
-    for body in scene.bodies:
+    for k, body in enumerate(scene.bodies):
         x0, x1 = body.x_range
         c = cols[(cols >= x0) & (cols <= x1)]
         xm = 0.5 * (x0 + x1) if scene.mesh.focus is None else 0.5 * sum(scene.mesh.focus)
         H = float(body.height(np.clip(xm, x0, x1)))
         depth = body.focus_depth
-        eta = graded_points(0.0, 1.0, body.layers, int(level),
+        eta = graded_points(0.0, 1.0, body.layers, level,
                             None if depth is None else (0.0, min(depth / H, 1.0)),
                             scene.mesh.grading)
-        bm = BodyMesh(body, offset, c, eta)
+        fy = body.face.value(c) if face_y[k] is None else face_y[k](c)
+        bm = BodyMesh(body, offset, c, eta, fy)
         bms.append(bm)
         pts.append(bm.points())
         offset += bm.n_nodes

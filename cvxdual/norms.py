@@ -44,3 +44,23 @@ def stress_error(system: System, t: np.ndarray, reference, n: int = DEFAULT_QUAD
 def l2_norm(system: System, t: np.ndarray) -> float:
     """``||t||_0`` of piecewise-constant stresses."""
     return float(np.sqrt(np.sum(system.pieces.area * np.sum(VOIGT_WEIGHT * t**2, axis=1))))
+
+
+def stress_distance(a, b, n: int = DEFAULT_QUAD) -> dict:
+    """``||lam_a - lam_b||_0`` between two solutions of the same scene on different meshes:
+    quadrature on ``a``'s pieces, each point located in ``b``'s pieces."""
+    from .errors import CvxdualError
+    from .locate import locate
+    pa = a.system.pieces
+    pts, w, idx = pa.quadrature(n)
+    # Gauss points are interior; the tolerance only absorbs rounding where a's and b's faces
+    # are the same curve evaluated at different points
+    tol = 1e-10 * a.scene.length_scale
+    loc = locate(b.mesh, b.system.pieces, pts, pa.body[idx], tol)
+    if np.any(loc < 0):
+        raise CvxdualError(f"{int(np.sum(loc < 0))} quadrature points of one solution lie outside the "
+                           "other's pieces: the solutions are not of the same scene")
+    diff = a.stress[idx] - b.stress[loc]
+    d = float(np.sqrt(np.sum(w * np.sum(VOIGT_WEIGHT * diff**2, axis=1))))
+    ref = float(np.sqrt(np.sum(w * np.sum(VOIGT_WEIGHT * b.stress[loc] ** 2, axis=1))))
+    return {"l2": d, "l2_rel": d / ref if ref > 0 else float("nan")}

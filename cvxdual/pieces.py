@@ -82,6 +82,7 @@ class Pieces:
     tri_piece: np.ndarray  # (n_tri,) piece index of each straight triangle
     slabs: Slabs
     faces: tuple  # face profile of each body, for slabs bounded by the face
+    tri_map: np.ndarray  # (n_mesh_triangles,) piece covering each mesh triangle's region
 
     def __len__(self) -> int:
         return len(self.kind)
@@ -94,19 +95,8 @@ class Pieces:
     def counts(self) -> dict[str, int]:
         return {name: int(np.sum(self.kind == k)) for k, name in enumerate(PIECE_KINDS)}
 
-    # -- geometry of slabs -------------------------------------------------------------
     def _bound(self, x, idx, which: str):
-        s = self.slabs
-        line = getattr(s, which)
-        t = (x - s.xl[idx]) / (s.xr[idx] - s.xl[idx])
-        y = line[idx, 0] + t * (line[idx, 1] - line[idx, 0])
-        arc = getattr(s, which + "_arc")[idx]
-        if np.any(arc):
-            for b, face in enumerate(self.faces):
-                m = arc & (s.body[idx] == b)
-                if np.any(m):
-                    y = np.where(m, face.value(x), y)
-        return y
+        return slab_bound(self.slabs, self.faces, x, idx, which)
 
     # -- quadrature --------------------------------------------------------------------
     def quadrature(self, n: int = 4):
@@ -146,11 +136,90 @@ class Pieces:
         return out
 
 
-def triangle_pieces(points: np.ndarray, tris: np.ndarray, body: np.ndarray, faces) -> Pieces:
-    """Pieces for a mesh of straight triangles only."""
-    xy = points[tris]
+def slab_bound(slabs: Slabs, faces, x, idx, which: str) -> np.ndarray:
+    """The ``lo`` or ``hi`` bound of slabs ``idx`` at abscissae ``x`` (same shape)."""
+    line = getattr(slabs, which)
+    t = (x - slabs.xl[idx]) / (slabs.xr[idx] - slabs.xl[idx])
+    y = line[idx, 0] + t * (line[idx, 1] - line[idx, 0])
+    arc = getattr(slabs, which + "_arc")[idx]
+    if np.any(arc):
+        for b, face in enumerate(faces):
+            m = arc & (slabs.body[idx] == b)
+            if np.any(m):
+                y = np.where(m, face.value(x), y)
+    return y
+
+
+def slab_bound_integral(slabs: Slabs, faces, which: str) -> np.ndarray:
+    """``int_{xl}^{xr} bound(x) dx`` exactly: trapezoid for lines, the profile's integral for arcs."""
+    line = getattr(slabs, which)
+    val = 0.5 * (line[:, 0] + line[:, 1]) * (slabs.xr - slabs.xl)
+    arc = getattr(slabs, which + "_arc")
+    for b, face in enumerate(faces):
+        m = arc & (slabs.body == b)
+        if np.any(m):
+            val[m] = face.integral(slabs.xl[m], slabs.xr[m])
+    return val
+
+
+def build_pieces(points, tris, tri_body, faces, keep=None, curved=None) -> Pieces:
+    """Pieces from straight mesh triangles (those with ``keep`` true) and curved pieces.
+
+    ``curved`` is a dict with per-piece ``kind``, ``body``, ``nodes`` ``(n, 3)``, ``replaces``
+    (mesh triangle whose region the piece takes over, or -1) and per-slab ``slabs`` (a
+    :class:`Slabs` with piece indices local to ``curved``), ``edge`` ``(m, 2)`` local node
+    positions and ``edge_x`` ``(m, 2)`` abscissae of the face edge whose ``V_h`` trace is
+    extended along y over the slab. A slab's strain is ``(du_x/dx, 0, du_y/dx)`` along that
+    edge; the piece's strain is the area-weighted mean over its slabs.
+    """
+    keep = np.ones(len(tris), bool) if keep is None else keep
+    kept = np.flatnonzero(keep)
+    xy = points[tris[kept]]
     B, area = p1_strain(xy)
-    n = len(tris)
-    return Pieces(kind=np.zeros(n, dtype=np.int8), body=body.astype(np.int8), nodes=tris.copy(),
-                  B=B, area=area, phi=np.repeat(area[:, None] / 3.0, 3, axis=1),
-                  tri_vertices=xy, tri_piece=np.arange(n), slabs=Slabs.empty(), faces=tuple(faces))
+    n_s = len(kept)
+    tri_map = np.full(len(tris), -1)
+    tri_map[kept] = np.arange(n_s)
+    kinds, bodies, nodes = [np.zeros(n_s, np.int8)], [tri_body[kept].astype(np.int8)], [tris[kept]]
+    Bs, areas, phis = [B], [area], [np.repeat(area[:, None] / 3.0, 3, axis=1)]
+    slabs = Slabs.empty()
+    if curved is not None and len(curved["kind"]):
+        c = curved
+        s = c["slabs"]
+        n_c = len(c["kind"])
+        gl = Slabs(piece=s.piece + n_s, **{k: getattr(s, k) for k in
+                                          ("body", "xl", "xr", "lo", "hi", "lo_arc", "hi_arc")})
+        a_s = slab_bound_integral(s, faces, "hi") - slab_bound_integral(s, faces, "lo")
+        a_p = np.bincount(s.piece, weights=a_s, minlength=n_c)
+        dx = c["edge_x"][:, 1] - c["edge_x"][:, 0]
+        Bsl = np.zeros((len(s), 3, 6))
+        r = np.arange(len(s))
+        k0, k1 = c["edge"][:, 0], c["edge"][:, 1]
+        Bsl[r, 0, 2 * k0] = -1.0 / dx
+        Bsl[r, 0, 2 * k1] = 1.0 / dx
+        Bsl[r, 2, 2 * k0 + 1] = -1.0 / dx
+        Bsl[r, 2, 2 * k1 + 1] = 1.0 / dx
+        Bc = np.zeros((n_c, 3, 6))
+        np.add.at(Bc, s.piece, a_s[:, None, None] * Bsl)
+        Bc /= a_p[:, None, None]
+        # phi_a(x) is the edge's hat function (v_h is constant along y); Gauss in x is exact
+        # for polynomial bounds and converges fast for the smooth arcs
+        u, w = gauss01(8)
+        x = s.xl[:, None] + u[None, :] * (s.xr - s.xl)[:, None]
+        idx = np.repeat(r, len(u))
+        height = (slab_bound(s, faces, x.ravel(), idx, "hi")
+                  - slab_bound(s, faces, x.ravel(), idx, "lo")).reshape(x.shape)
+        wh = w[None, :] * (s.xr - s.xl)[:, None] * height
+        t = (x - c["edge_x"][:, :1]) / dx[:, None]
+        phi = np.zeros((n_c, 3))
+        np.add.at(phi, (s.piece, k0), np.sum(wh * (1 - t), axis=1))
+        np.add.at(phi, (s.piece, k1), np.sum(wh * t, axis=1))
+        kinds.append(np.asarray(c["kind"], np.int8))
+        bodies.append(np.asarray(c["body"], np.int8))
+        nodes.append(np.asarray(c["nodes"]))
+        Bs.append(Bc), areas.append(a_p), phis.append(phi)
+        rep = np.asarray(c["replaces"])
+        tri_map[rep[rep >= 0]] = n_s + np.flatnonzero(rep >= 0)
+        slabs = gl
+    return Pieces(kind=np.concatenate(kinds), body=np.concatenate(bodies), nodes=np.concatenate(nodes),
+                  B=np.concatenate(Bs), area=np.concatenate(areas), phi=np.concatenate(phis),
+                  tri_vertices=xy, tri_piece=np.arange(n_s), slabs=slabs, faces=tuple(faces), tri_map=tri_map)

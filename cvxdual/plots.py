@@ -66,11 +66,22 @@ def plot_stress(sol, path: Path) -> Path:
         ax.add_collection(pc)
         ax.autoscale_view()
         ax.set_aspect("equal")
+        for bm in sol.mesh.bodies:
+            ax.add_collection(LineCollection([body_outline(bm.body)], colors="k", linewidths=0.5))
         ax.set_title(f"{title} [{S}]")
         ax.set_xlabel(f"x [{L}]")
         fig.colorbar(pc, ax=ax, shrink=0.8)
     fig.suptitle(f"{sol.scene.name}, {sol.triangulation}, level {sol.level}: {len(t)} pieces")
     return _save(fig, path)
+
+
+def body_outline(body, n: int = 400) -> np.ndarray:
+    """Closed outline of a body on its true (curved) face."""
+    x0, x1 = body.x_range
+    xs = np.linspace(x0, x1, n)
+    face = np.stack([xs, body.face.value(xs)], 1)
+    far = np.array([[x1, body.far], [x0, body.far]])
+    return np.concatenate([face, far, face[:1]])
 
 
 def deformation_scale(sol) -> float:
@@ -93,15 +104,13 @@ def plot_deformed(sol, path: Path) -> Path:
                             edgecolors="face", linewidths=0.0)
         ax.add_collection(pc)
         fig.colorbar(pc, ax=ax, shrink=0.8, label=f"|u| [{L}]")
-    # undeformed outline of the bodies for reference
     for bm in sol.mesh.bodies:
-        ring = np.concatenate([bm.side_nodes("face"), bm.side_nodes("right"),
-                               bm.side_nodes("far")[::-1], bm.side_nodes("left")[::-1]])
-        xy = pts[ring]
-        ax.add_collection(LineCollection([xy], colors="tab:blue", linewidths=0.8, linestyles="--"))
+        ax.add_collection(LineCollection([body_outline(bm.body)], colors="tab:blue", linewidths=0.8,
+                                         linestyles="--"))
     ax.autoscale_view()
     ax.set_aspect("equal")
-    ax.set_title(f"deformed mesh, displacements x {k:.3g} (dashed: undeformed)")
+    note = "" if sol.scene.gap_profile.is_flat() else "; the gap function is not drawn"
+    ax.set_title(f"deformed mesh, displacements x {k:.3g} (dashed: undeformed){note}")
     ax.set_xlabel(f"x [{L}]")
     return _save(fig, path)
 

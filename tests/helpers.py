@@ -17,3 +17,27 @@ def primal(scene: str, level: int, triangulation: str = "type1"):
     model = cd.PrimalModel(solved(scene, level, triangulation).system)
     model.solve()
     return model
+
+
+def contains(pieces, pts):
+    """Brute force, independent of cvxdual.locate: boolean (m, n_pieces), which pieces contain
+    each point (barycentric signs for triangles, bounds for slabs)."""
+    import numpy as np
+
+    from cvxdual.pieces import slab_bound
+
+    m = len(pts)
+    hit = np.zeros((m, len(pieces)), bool)
+    d = pieces.tri_vertices[None, :, :, :] - pts[:, None, None, :]
+    cr = [d[..., a, 0] * d[..., b, 1] - d[..., a, 1] * d[..., b, 0] for a, b in ((0, 1), (1, 2), (2, 0))]
+    hit[:, pieces.tri_piece] = (cr[0] >= 0) & (cr[1] >= 0) & (cr[2] >= 0)
+    s = pieces.slabs
+    if len(s):
+        x = np.broadcast_to(pts[:, :1], (m, len(s)))
+        idx = np.broadcast_to(np.arange(len(s))[None, :], (m, len(s)))
+        xc = np.clip(x, s.xl[idx], s.xr[idx])
+        lo = slab_bound(s, pieces.faces, xc, idx, "lo")
+        hi = slab_bound(s, pieces.faces, xc, idx, "hi")
+        ins = (x >= s.xl[idx]) & (x <= s.xr[idx]) & (pts[:, 1:] >= lo) & (pts[:, 1:] <= hi)
+        np.logical_or.at(hit.T, s.piece, ins.T)  # a piece with two slabs: either counts
+    return hit
