@@ -77,12 +77,6 @@ class DualModel:
         r = s.r0 - s.scales.displacement * (s.T() @ y)
         return s.Z @ r
 
-    def objective_value(self, t: np.ndarray) -> float:
-        """``S(t) = 1/2 t.A_h t - t.E^T q0`` in physical units."""
-        s = self.system
-        tv = t.ravel()
-        return 0.5 * float(tv @ (s.Ah @ tv)) - float(tv @ (s.E.T @ s.q0))
-
 
 def admissibility(system: System, t: np.ndarray):
     """Residual vector ``R = Z^T (E t - f)`` of stresses ``t`` ``(n_pieces, 3)``, and its scale

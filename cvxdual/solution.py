@@ -20,7 +20,7 @@ from .errors import AccuracyError
 from .exact import exact_field
 from .norms import VOIGT_WEIGHT, stress_error
 from .scene import Scene
-from .solvers import resolve_solver
+from .solvers import FAST, resolve_solver
 from .triangulation import check_triangulation, discretize
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
@@ -29,6 +29,12 @@ from .triangulation import check_triangulation, discretize
 TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6}
 
 ACTIVE_TOL = 1e-6  # a pair is active when its force exceeds this fraction of the largest
+FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
+
+
+def load_scale(system: System) -> float:
+    """``F_ref = sum |f|``: the size of the applied loads (or of the stress scale if unloaded)."""
+    return float(np.abs(system.f).sum()) or system.scales.stress * system.scales.length
 
 
 @dataclass
@@ -93,8 +99,8 @@ def contact_quantities(system: System, t: np.ndarray, u: np.ndarray) -> dict:
     up, lo = system.mesh.pairs.T
     rel = u[2 * lo + 1] - u[2 * up + 1]
     pressure = force / system.width
-    fmax = float(force.max()) if len(force) else 0.0
-    active = force > ACTIVE_TOL * fmax if fmax > 0 else np.zeros(len(force), bool)
+    fmax = max(float(force.max()) if len(force) else 0.0, FORCE_FLOOR * load_scale(system))
+    active = force > ACTIVE_TOL * fmax
     xs = system.mesh.pair_x[active]
     return {
         "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
@@ -117,12 +123,17 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict) -> di
     - complementarity: ``sum |F_k s_k| / (sum |F_k| * delta)``, ``s_k = eps_k - (u''_y - u'_y)``,
       ``delta`` the largest displacement or gap;
     - penetration: ``max(0, -s_k) / delta``.
+
+    Force denominators are floored (``F_ref = sum |f|``, the load scale: ``1e-6 F_ref`` for nodal
+    forces, ``1e-3 F_ref`` for the total contact force) so that a solution with (almost) no
+    contact is not judged on rounding noise.
     """
     R, scale = admissibility(system, t)
+    f_ref = load_scale(system)
     Ry = system.T().T @ R
     viol = np.abs(Ry)
     viol[system.jb] = np.maximum(Ry[system.jb], 0.0)
-    eq = float(viol.max() / max(scale.max(), 1e-300)) if len(viol) else 0.0
+    eq = float(viol.max() / max(scale.max(), 1e-6 * f_ref)) if len(viol) else 0.0
     tu = system.stresses_from_displacement(u)
     a = system.pieces.area[:, None]
     num = np.sqrt(np.sum(a * VOIGT_WEIGHT * (t - tu) ** 2))
@@ -131,10 +142,16 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict) -> di
     s = contact["gap"] - contact["relative_displacement"]
     delta = max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), 1e-300)
     F = contact["force"]
-    fsum = float(np.abs(F).sum())
-    comp = float(np.sum(np.abs(F * s)) / (fsum * delta)) if fsum > 0 else 0.0
+    fsum = max(float(np.abs(F).sum()), FORCE_FLOOR * f_ref)
+    comp = float(np.sum(np.abs(F * s)) / (fsum * delta))
     pen = float(max(0.0, -s.min()) / delta) if len(s) else 0.0
     return {"equilibrium": eq, "constitutive": cons, "complementarity": comp, "penetration": pen}
+
+
+def dual_objective(system: System, t: np.ndarray) -> float:
+    """``S(t) = 1/2 t.A_h t - t.E^T q0`` (MATH.md section 3)."""
+    tv = t.ravel()
+    return 0.5 * float(tv @ (system.Ah @ tv)) - float(tv @ (system.E.T @ system.q0))
 
 
 def duality_gap(system: System, t: np.ndarray, u: np.ndarray, objective: float) -> float:
@@ -152,40 +169,60 @@ def build_model(scene: Scene, triangulation: str = "type1", level: int | None = 
 
 
 def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
-          solver: str | None = None, check: bool = True, **solver_options) -> Solution:
-    """Solve the discrete dual problem of ``scene``; see the module docstring."""
+          solver: str | None = None, check: bool = True, warm_start: bool = True,
+          **solver_options) -> Solution:
+    """Solve the discrete dual problem of ``scene``; see the module docstring.
+
+    ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
+    :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
+    """
     solver = resolve_solver(solver)
     triangulation = check_triangulation(triangulation)
     level = scene.mesh.default_level if level is None else level
-    timings = {}
     t0 = time.perf_counter()
     mesh, pieces, ties = discretize(scene, triangulation, level)
     t1 = time.perf_counter()
     system = assemble(mesh, pieces, ties)
     t2 = time.perf_counter()
-    model = DualModel(system)
-    t3 = time.perf_counter()
-    info = model.solve(solver, **solver_options)
-    t4 = time.perf_counter()
-    sol = recover(model, triangulation, level, info, check)
+    if solver == FAST:
+        from .fast import solve_fast, transfer_active
+        active = None
+        if warm_start and level >= 2:
+            coarse = solve(scene, triangulation, level - 2, FAST, check=False)
+            active = transfer_active(coarse.contact["x"], coarse.contact["active"], mesh.pair_x)
+        t3 = time.perf_counter()
+        u, info = solve_fast(system, active)
+        t4 = time.perf_counter()
+        sol = make_solution(system, system.stresses_from_displacement(u), u, triangulation, level, info, check)
+        build, solve_time = 0.0, t4 - t2
+    else:
+        model = DualModel(system)
+        t3 = time.perf_counter()
+        info = model.solve(solver, **solver_options)
+        t4 = time.perf_counter()
+        sol = recover(model, triangulation, level, info, check)
+        # CVXPY canonicalises inside solve(); count that as building the problem
+        compile_time = float(info.get("compile_time") or 0.0)
+        build, solve_time = t3 - t2 + compile_time, t4 - t3 - compile_time
     t5 = time.perf_counter()
-    # CVXPY canonicalises inside solve(); count that as building the problem
-    compile_time = float(info.get("compile_time") or 0.0)
-    timings.update(mesh=t1 - t0, assemble=t2 - t1, build=t3 - t2 + compile_time,
-                   solve=t4 - t3 - compile_time, recover=t5 - t4, total=t5 - t0)
-    sol.timings = timings
+    sol.timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": solve_time,
+                   "recover": t5 - t4, "total": t5 - t0}
     return sol
 
 
 def recover(model: DualModel, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
-    """Stresses, displacements, contact data, residuals, gap and errors from a solved model."""
-    system = model.system
+    """The :class:`Solution` of a solved CVXPY model: stresses, and displacements from the multipliers."""
+    return make_solution(model.system, model.stresses(), model.displacements(), triangulation, level, info,
+                         check and not model.extra)
+
+
+def make_solution(system: System, t: np.ndarray, u: np.ndarray, triangulation: str, level: int, info: dict,
+                  check: bool = True) -> Solution:
+    """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and displacements ``u``."""
     scene = system.mesh.scene
-    t = model.stresses()
-    u = model.displacements()
     contact = contact_quantities(system, t, u)
     res = residuals(system, t, u, contact)
-    objective = model.objective_value(t)
+    objective = dual_objective(system, t)
     gap = duality_gap(system, t, u, objective)
     exact = exact_field(scene)
     error = stress_error(system, t, exact.stress) if exact is not None else None
@@ -193,7 +230,7 @@ def recover(model: DualModel, triangulation: str, level: int, info: dict, check:
                    displacement=u.reshape(-1, 2), solver=info, timings={}, objective=objective,
                    duality_gap=gap, residuals=res, contact=contact,
                    exact=exact.data() if exact is not None else None, error=error)
-    if check and not model.extra:
+    if check:
         check_solution(sol)
     return sol
 

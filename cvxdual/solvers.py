@@ -9,6 +9,7 @@ import cvxpy as cp
 from .errors import SolverError, UnknownSolverError
 
 DEFAULT_SOLVER = "CLARABEL"
+FAST = "FAST"  # the active-set path of cvxdual.fast, not a CVXPY solver
 
 # Options that make each solver reach the accuracy the package promises (see README).
 # Clarabel's defaults (1e-8 gaps and feasibility) already do; first-order solvers need
@@ -23,6 +24,8 @@ SOLVER_OPTIONS: dict[str, dict] = {
 def resolve_solver(name: str | None) -> str:
     """Normalise a solver name; raise :class:`UnknownSolverError` naming the installed ones."""
     name = DEFAULT_SOLVER if name is None else str(name).upper()
+    if name == FAST:
+        return FAST
     installed = cp.installed_solvers()
     if name not in installed:
         raise UnknownSolverError(

@@ -1,0 +1,52 @@
+"""The fast path (active set + sparse factorisation) against the CVXPY reference path."""
+
+import numpy as np
+import pytest
+
+import cvxdual as cd
+from cvxdual.norms import l2_norm
+
+from helpers import solved
+
+SCENES = ["patch", "hertz", "blocks", "cylinder-on-block", "cylinder-in-groove", "wavy"]
+
+
+@pytest.mark.parametrize("tri", ["type1", "type2"])
+@pytest.mark.parametrize("scene", SCENES)
+def test_fast_agrees_with_cvxpy(scene, tri):
+    a = solved(scene, 2, tri)
+    b = cd.solve(cd.load_scene(scene), tri, 2, "fast")
+    s = a.system
+    # the active-set solution is exact up to the factorisation; Clarabel stops at 1e-8
+    # tolerances, which leaves about 1e-7 in the stresses at this size
+    assert l2_norm(s, a.stress - b.stress) <= 1e-6 * l2_norm(s, a.stress)
+    np.testing.assert_array_equal(a.contact["active"], b.contact["active"])
+    # exact KKT: equilibrium and complementarity at rounding level
+    assert b.residuals["equilibrium"] < 1e-10 and b.residuals["complementarity"] < 1e-10
+    assert b.solver["status"] == "optimal"
+
+
+def test_warm_start_needs_few_iterations():
+    sc = cd.load_scene("hertz")
+    cold = cd.solve(sc, level=4, solver="fast", warm_start=False)
+    warm = cd.solve(sc, level=4, solver="fast")
+    np.testing.assert_allclose(warm.stress, cold.stress, rtol=0, atol=1e-9 * np.abs(cold.stress).max())
+    # the coarse (level 2) active set, edges put halfway, is at most a pair or two off
+    assert warm.solver["iterations"] <= 3 < cold.solver["iterations"]
+    assert warm.solver["factorizations"] == 1
+
+
+def test_no_contact_at_all():
+    # a 0.01 mm offset on top of the parabolic gap, the lower block on sliding supports all
+    # round and loaded by its weight-like body force only: it deforms 1e-3 mm, the gap stays open
+    sc = cd.load_scene("blocks", [{"contact": {"gap": {"kind": "parabola", "R": 1000.0, "y0": 0.01}},
+                                   "bodies": {"lower": {"body_force": [0.0, 1.0], "boundary": {
+                                       "push": {"traction": {"value": [0.0, 0.0]}},
+                                       "bottom": {"on": "far", "kind": "sliding"}}}}}])
+    for solver in ("fast", "CLARABEL"):
+        sol = cd.solve(sc, level=1, solver=solver)
+        assert sol.contact["n_active"] == 0
+        # the body force totals 200 N/mm; an interior point leaves ~1e-10 of it on open pairs
+        assert abs(sol.contact["total_force"]) < 1e-9 * 200.0
+        opening = sol.contact["gap"] - sol.contact["relative_displacement"]
+        assert opening.min() > 0.009
