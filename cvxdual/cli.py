@@ -69,6 +69,15 @@ def _cmd_solve(args) -> int:
     return 0
 
 
+STUDIES = ("convergence", "speed", "stability")
+
+
+def _cmd_study(args) -> int:
+    import importlib
+    mod = importlib.import_module(f"cvxdual.study.{args.name}")
+    return mod.main(args.rest)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
                                 "contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
@@ -86,6 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
+    st = sub.add_parser("study", help="run a study (convergence, speed, stability); see --help of each",
+                        add_help=False)
+    st.add_argument("name", choices=STUDIES)
+    st.add_argument("rest", nargs=argparse.REMAINDER, help="the study's own options (e.g. --quick)")
+    st.set_defaults(func=_cmd_study)
     return p
 
 

@@ -61,6 +61,10 @@ class Solution:
     def mesh(self):
         return self.system.mesh
 
+    @property
+    def pieces(self):
+        return self.system.pieces
+
     def summary(self) -> dict:
         """The ``summary.json`` contract (README, "Outputs")."""
         s = self.system

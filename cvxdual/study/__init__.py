@@ -1,0 +1,1 @@
+"""Study runners behind ``studies/*.py`` and ``cvxdual study ...``: convergence, speed, stability."""
