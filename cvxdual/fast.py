@@ -35,7 +35,7 @@ MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactor
 class _Base:
     """The factorised reduced stiffness of one active set."""
 
-    def __init__(self, ps: "ActiveSet", active: np.ndarray):
+    def __init__(self, ps: "ActiveSet", active: np.ndarray, factorize: bool = True):
         s = ps.system
         n_r = s.n_r
         self.active = active.copy()
@@ -54,10 +54,11 @@ class _Base:
         ok = (zd[:, :, None] >= 0) & (zd[:, None, :] >= 0)
         rows = np.broadcast_to(zd[:, :, None], ps.kloc.shape)[ok]
         cols = np.broadcast_to(zd[:, None, :], ps.kloc.shape)[ok]
-        K0 = sp.csr_matrix((ps.kloc[ok], (rows, cols)), shape=(self.n_z, self.n_z))
+        self.K = sp.csr_matrix((ps.kloc[ok], (rows.astype(np.int32), cols.astype(np.int32))),
+                               shape=(self.n_z, self.n_z))
         self.b_r = ps.g - ps.apply_K(self.r_e)  # r-space right-hand side with the gap moved over
         self.rhs = self.project(self.b_r)
-        self.factor = SPDFactor(K0)
+        self.factor = SPDFactor(self.K) if factorize else None
 
     def project(self, v: np.ndarray) -> np.ndarray:
         """``P0^T v`` for r-space vectors or ``(n_r, m)`` arrays."""
@@ -77,7 +78,8 @@ class ActiveSet:
         self.system = s = system
         p = s.pieces
         # local stiffness |P| B^T C B of every piece, reused by every factorisation
-        self.kloc = p.area[:, None, None] * np.einsum("pki,pkl,plj->pij", p.B, s.C, p.B)
+        self.kloc = np.matmul(p.B.transpose(0, 2, 1), np.matmul(s.C, p.B))
+        self.kloc *= p.area[:, None, None]
         self.rd = s.rdof[p.dofs]
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)
@@ -136,8 +138,8 @@ class ActiveSet:
         tol = 1e-9 * max(float(np.abs(s.eps).max()), s.scales.displacement)
         return s.eps <= s.eps.min() + tol
 
-    def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(r, force)``: free displacements and nodal contact forces."""
+    def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return ``(r, force, active)``: free displacements, nodal contact forces, active set."""
         s = self.system
         A = self.initial() if active is None else np.asarray(active, bool).copy()
         if len(s.separating.T) and not A.any():
@@ -164,7 +166,7 @@ class ActiveSet:
                 new[np.argmin(opening)] = True
             self.stats["iterations"] = it
             if np.array_equal(new, A):
-                return r, force
+                return r, force, A
             key = new.tobytes()
             if key in seen:
                 raise SolverError("fast path: the active set cycles; use the CVXPY path (--solver CLARABEL)")
@@ -180,11 +182,32 @@ def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.
     return np.interp(fine_x, coarse_x, coarse_active.astype(float)) >= 0.5
 
 
+def limit_matrix(system: System):
+    """The stiffness of the speed "limit": ``K`` with every contact pair closed (the bodies
+    tied, floating modes at the anchors), SPD, the same size and sparsity as the fast
+    path's matrices; and its right-hand side."""
+    base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
+    return base.K, base.rhs
+
+
+def cascade(scene, triangulation: str, level: int, pair_x: np.ndarray) -> np.ndarray | None:
+    """Warm start for ``level``: the active set of level ``level - 2`` (itself warm-started the
+    same way), transferred to the abscissae ``pair_x``; ``None`` below level 2."""
+    if level < 2:
+        return None
+    from .triangulation import discretize
+    from .assembly import assemble
+    mesh, pieces, ties = discretize(scene, triangulation, level - 2)
+    system = assemble(mesh, pieces, ties)
+    _, _, active = ActiveSet(system).solve(cascade(scene, triangulation, level - 2, mesh.pair_x))
+    return transfer_active(mesh.pair_x, active, pair_x)
+
+
 def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Displacements ``u`` (all dofs) and solver statistics."""
     t0 = time.perf_counter()
     ps = ActiveSet(system)
-    r, _ = ps.solve(active)
+    r, _, _ = ps.solve(active)
     info = {"solver": "fast", "status": "optimal", "backend": backend(), **ps.stats,
             "solve_time": time.perf_counter() - t0}
     return system.Z @ r, info

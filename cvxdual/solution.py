@@ -189,11 +189,8 @@ def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
     system = assemble(mesh, pieces, ties)
     t2 = time.perf_counter()
     if solver == FAST:
-        from .fast import solve_fast, transfer_active
-        active = None
-        if warm_start and level >= 2:
-            coarse = solve(scene, triangulation, level - 2, FAST, check=False)
-            active = transfer_active(coarse.contact["x"], coarse.contact["active"], mesh.pair_x)
+        from .fast import cascade, solve_fast
+        active = cascade(scene, triangulation, level, mesh.pair_x) if warm_start else None
         t3 = time.perf_counter()
         u, info = solve_fast(system, active)
         t4 = time.perf_counter()
