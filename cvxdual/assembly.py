@@ -111,6 +111,13 @@ class System:
         """``t_P = C_P B_P q`` ``(n_pieces, 3)``."""
         return np.einsum("pij,pj->pi", self.C, self.strains(q))
 
+    def local_stiffness(self) -> np.ndarray:
+        """``|P| B_P^T C_P B_P`` of every piece, ``(n_pieces, 6, 6)``."""
+        p = self.pieces
+        k = np.matmul(p.B.transpose(0, 2, 1), np.matmul(self.C, p.B))
+        k *= p.area[:, None, None]
+        return k
+
     def energy(self, q: np.ndarray) -> float:
         """Primal energy ``1/2 a(q, q) - L(q)``."""
         g = self.strains(q)
@@ -176,14 +183,21 @@ def _tributary(x: np.ndarray) -> np.ndarray:
     return w
 
 
-def _side_nodes(bm, part, points) -> np.ndarray:
-    nodes = bm.side_nodes(part.on)
+def _in_part(part, points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """Which side nodes lie in the part's interval (x on face/far, y on left/right). Supports
+    act on these nodes and tractions on the edges between two of them, so both select the
+    same stretch of boundary; interval ends on face/far are columns (see triangulation)."""
     if part.interval is None:
-        return nodes
+        return np.ones(len(nodes), bool)
     lo, hi = part.interval
     c = points[nodes, 0 if part.on in ("face", "far") else 1]
-    tol = 1e-12 * (abs(lo) + abs(hi) + 1.0)
-    return nodes[(c >= lo - tol) & (c <= hi + tol)]
+    tol = 1e-12 * (abs(lo) + abs(hi) + 1.0)  # ends are columns: only rounding separates them
+    return (c >= lo - tol) & (c <= hi + tol)
+
+
+def _side_nodes(bm, part, points) -> np.ndarray:
+    nodes = bm.side_nodes(part.on)
+    return nodes[_in_part(part, points, nodes)]
 
 
 def _free_dofs(mesh: Mesh, ties) -> np.ndarray:
@@ -248,13 +262,10 @@ def side_quadrature(mesh: Mesh, k: int, part, n_gauss: int = 8):
     body = bm.body
     u, w = gauss01(n_gauss)
     nodes = bm.side_nodes(part.on)
-    a, b = nodes[:-1], nodes[1:]
+    inside = _in_part(part, mesh.points, nodes)
+    keep = inside[:-1] & inside[1:]
+    a, b = nodes[:-1][keep], nodes[1:][keep]
     pa, pb = mesh.points[a], mesh.points[b]
-    if part.interval is not None:
-        c = 0 if part.on in ("face", "far") else 1
-        mid = 0.5 * (pa[:, c] + pb[:, c])
-        keep = (mid >= part.interval[0]) & (mid <= part.interval[1])
-        a, b, pa, pb = a[keep], b[keep], pa[keep], pb[keep]
     if part.on == "face":
         dx = pb[:, 0] - pa[:, 0]
         xs = pa[:, :1] + u[None, :] * dx[:, None]

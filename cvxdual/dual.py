@@ -90,9 +90,8 @@ def admissibility(system: System, t: np.ndarray):
 
 def stiffness(system: System) -> sp.csr_matrix:
     """``K = E A_h^-1 E^T = sum_P |P| B_P^T C_P B_P`` on all dofs."""
-    p = system.pieces
-    k = p.area[:, None, None] * np.einsum("pki,pkl,plj->pij", p.B, system.C, p.B)
-    d = p.dofs
+    k = system.local_stiffness()
+    d = system.pieces.dofs
     rows = np.broadcast_to(d[:, :, None], k.shape).ravel()
     cols = np.broadcast_to(d[:, None, :], k.shape).ravel()
     n = system.n_dofs

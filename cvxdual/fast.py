@@ -76,11 +76,8 @@ class ActiveSet:
 
     def __init__(self, system: System):
         self.system = s = system
-        p = s.pieces
-        # local stiffness |P| B^T C B of every piece, reused by every factorisation
-        self.kloc = np.matmul(p.B.transpose(0, 2, 1), np.matmul(s.C, p.B))
-        self.kloc *= p.area[:, None, None]
-        self.rd = s.rdof[p.dofs]
+        self.kloc = s.local_stiffness()  # reused by every factorisation
+        self.rd = s.rdof[s.pieces.dofs]
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)
         self.anchored[s.anchors] = True
@@ -136,14 +133,33 @@ class ActiveSet:
         """Cold start: the pairs at the smallest gap (the first to touch)."""
         s = self.system
         tol = 1e-9 * max(float(np.abs(s.eps).max()), s.scales.displacement)
-        return s.eps <= s.eps.min() + tol
+        return self.cover(s.eps <= s.eps.min() + tol, s.eps)
+
+    def cover(self, A: np.ndarray, closeness: np.ndarray) -> np.ndarray:
+        """``A`` plus, if needed, the closest pairs (smallest ``closeness``) that stop every
+        separating rigid motion: a body held only by contact needs as many independent
+        active pairs as it has such motions, or ``K_A`` is singular."""
+        s = self.system
+        m = s.separating.shape[1]
+        if not m:
+            return A
+        dk = s.separating[s.jb] - s.separating[s.ja]  # relative motion of each pair, per mode
+        scale = max(float(np.abs(dk).max()), 1e-300)
+        rank = lambda rows: np.linalg.matrix_rank(rows, tol=1e-9 * scale) if len(rows) else 0  # noqa: E731
+        A = A.copy()
+        r = rank(dk[A])
+        for k in np.argsort(closeness, kind="stable"):
+            if r == m:
+                break
+            if not A[k] and rank(dk[A | (np.arange(len(A)) == k)]) > r:
+                A[k] = True
+                r += 1
+        return A
 
     def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(r, force, active)``: free displacements, nodal contact forces, active set."""
         s = self.system
-        A = self.initial() if active is None else np.asarray(active, bool).copy()
-        if len(s.separating.T) and not A.any():
-            A = self.initial()
+        A = self.initial() if active is None else self.cover(np.asarray(active, bool), s.eps)
         base = None
         fscale = max(float(np.abs(self.g).max()), 1e-300)
         dscale = s.scales.displacement
@@ -161,9 +177,7 @@ class ActiveSet:
             opening = s.eps - (r[s.jb] - r[s.ja])
             # rounding-level forces and penetrations do not change the set (avoids cycling
             # between equivalent sets at a degenerate contact edge)
-            new = np.where(A, force > -1e-12 * fscale, opening < -1e-12 * dscale)
-            if len(s.separating.T) and not new.any():
-                new[np.argmin(opening)] = True
+            new = self.cover(np.where(A, force > -1e-12 * fscale, opening < -1e-12 * dscale), opening)
             self.stats["iterations"] = it
             if np.array_equal(new, A):
                 return r, force, A

@@ -77,6 +77,7 @@ def _locate_body(mesh: Mesh, pieces: Pieces, k: int, toff: int, p: np.ndarray) -
             lo = slab_bound(s, pieces.faces, xb, cand, "lo")
             hi = slab_bound(s, pieces.faces, xb, cand, "hi")
             scale = np.abs(hi - lo).max() if len(hi) else 0.0
-            ok = (xb <= s.xr[cand]) & (y[below] >= lo - 1e-12 * scale) & (y[below] <= hi + 1e-12 * scale)
+            ok = ((xb >= s.xl[cand]) & (xb <= s.xr[cand]) & (y[below] >= lo - 1e-12 * scale)
+                  & (y[below] <= hi + 1e-12 * scale))
             res[below[ok]] = s.piece[cand[ok]]
     return res

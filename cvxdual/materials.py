@@ -12,18 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SceneError
+from .validate import number
 
 PLANES = ("strain", "stress")
-
-
-def _finite(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise SceneError(f"material {name} must be a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise SceneError(f"material {name} must be finite, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -41,8 +32,8 @@ class Material:
 
     @classmethod
     def isotropic(cls, E: float, nu: float, plane: str = "strain") -> "Material":
-        E = _finite("E", E)
-        nu = _finite("nu", nu)
+        E = number(E, "material E")
+        nu = number(nu, "material nu")
         if plane not in PLANES:
             raise SceneError(f"plane must be 'strain' or 'stress', got {plane!r}")
         if E <= 0:
@@ -66,7 +57,10 @@ class Material:
 
     @classmethod
     def hooke(cls, C, plane: str = "strain") -> "Material":
-        arr = np.asarray(C, dtype=float)
+        try:
+            arr = np.asarray(C, dtype=float)
+        except (TypeError, ValueError):
+            raise SceneError(f"a Hooke matrix must be 3x3 numbers (Voigt s11, s22, s12), got {C!r}") from None
         if arr.shape != (3, 3):
             raise SceneError(f"a Hooke matrix must be 3x3 (Voigt s11, s22, s12), got shape {arr.shape}")
         if not np.all(np.isfinite(arr)):
@@ -97,14 +91,11 @@ class Material:
 
     @property
     def modulus(self) -> float:
-        """A representative stiffness (largest eigenvalue of ``C``), used for scaling."""
-        return float(np.linalg.eigvalsh(self.stiffness)[-1])
-
-    def scaled(self, factor: float) -> "Material":
-        """The same material with stiffness divided by ``factor`` (for nondimensionalisation)."""
-        return Material(C=_as_tuple(self.stiffness / factor),
-                        E=None if self.E is None else self.E / factor,
-                        nu=self.nu, plane=self.plane, description=self.description)
+        """A representative stiffness for scaling: the uniaxial modulus ``1 / max(A11, A22)``
+        (``E / (1 - nu^2)`` in plane strain). Unlike the largest eigenvalue of ``C``, which
+        grows without bound as nu -> 1/2, it stays near ``E``; it makes the compliance O(1)."""
+        A = self.compliance
+        return float(1.0 / max(A[0, 0], A[1, 1]))
 
 
 def _as_tuple(a: np.ndarray) -> tuple[tuple[float, float, float], ...]:

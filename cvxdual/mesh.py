@@ -142,23 +142,20 @@ class Mesh:
     def n_nodes(self) -> int:
         return len(self.points)
 
+    def _edges(self) -> np.ndarray:
+        """Edge lengths of every triangle ``(n_tri, 3)``."""
+        p = self.points[self.triangles()]
+        return np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)
+
     @property
     def h(self) -> float:
-        """Largest column width or layer thickness in the mesh (the mesh size ``h``)."""
-        hs = []
-        for bm in self.bodies:
-            hs.append(np.diff(bm.columns).max())
-            hs.append((np.diff(bm.eta) * bm.body.height(bm.columns).max()).max())
-        return float(max(hs))
+        """The mesh size ``h``: the largest triangle diameter (longest edge)."""
+        return float(self._edges().max())
 
     @property
     def h_min(self) -> float:
-        """Smallest column width or layer thickness in the mesh."""
-        hs = []
-        for bm in self.bodies:
-            hs.append(np.diff(bm.columns).min())
-            hs.append((np.diff(bm.eta) * bm.body.height(bm.columns).min()).min())
-        return float(min(hs))
+        """The shortest triangle edge."""
+        return float(self._edges().min())
 
     def triangles(self) -> np.ndarray:
         return np.concatenate([bm.triangles() for bm in self.bodies])
@@ -201,6 +198,9 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
     for k, body in enumerate(scene.bodies):
         x0, x1 = body.x_range
         c = cols[(cols >= x0) & (cols <= x1)]
+        if len(c) < 2 or c[0] != x0 or c[-1] != x1:
+            raise MeshError(f"internal: the columns of body {body.name!r} do not reach its ends "
+                            f"[{x0:g}, {x1:g}]")  # pragma: no cover - the ends are always break points
         xm = 0.5 * (x0 + x1) if scene.mesh.focus is None else 0.5 * sum(scene.mesh.focus)
         H = float(body.height(np.clip(xm, x0, x1)))
         depth = body.focus_depth

@@ -116,25 +116,29 @@ def contact_table(sol):
                          "force": c["force"]})
 
 
-def piece_outlines(pieces, n: int = OUTLINE_POINTS) -> list[np.ndarray]:
-    """Outline polygon of every curved piece (the union of its slabs), following the face."""
+def piece_outlines(pieces, n: int = OUTLINE_POINTS) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Outlines of the curved pieces, following the face: ``[(piece ids (m,), polygons (m, v, 2))]``,
+    one entry per number of slabs (pieces of one entry have the same number of vertices)."""
+    from .pieces import slab_bound
     s = pieces.slabs
-    out: list[np.ndarray] = []
     if not len(s):
-        return out
-    order = np.argsort(s.piece, kind="stable")
-    pid = s.piece[order]
-    starts = np.flatnonzero(np.r_[True, pid[1:] != pid[:-1]])
-    ends = np.r_[starts[1:], len(pid)]
+        return []
+    order = np.lexsort((s.xl, s.piece))
+    counts = np.bincount(s.piece)
     k = max(2, n // 2)
-    for a, b in zip(starts, ends):
-        idx = order[a:b]
-        idx = idx[np.argsort(s.xl[idx])]
-        xs = np.concatenate([np.linspace(s.xl[i], s.xr[i], k) for i in idx])
-        ii = np.concatenate([np.full(k, i) for i in idx])
-        lo = pieces._bound(xs, ii, "lo")
-        hi = pieces._bound(xs, ii, "hi")
-        out.append(np.concatenate([np.stack([xs, lo], 1), np.stack([xs, hi], 1)[::-1]]))
+    t = np.linspace(0.0, 1.0, k)
+    out = []
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])  # first slab (in `order`) of each piece
+    for c in np.unique(counts[counts > 0]):
+        ids = np.flatnonzero(counts == c)
+        sl = order[start[ids][:, None] + np.arange(c)[None, :]]  # (m, c) slabs left to right
+        x = s.xl[sl][..., None] + t * (s.xr - s.xl)[sl][..., None]  # (m, c, k)
+        idx = np.broadcast_to(sl[..., None], x.shape)
+        lo = slab_bound(s, pieces.faces, x, idx, "lo").reshape(len(ids), -1)
+        hi = slab_bound(s, pieces.faces, x, idx, "hi").reshape(len(ids), -1)
+        xf = x.reshape(len(ids), -1)
+        poly = np.concatenate([np.stack([xf, lo], -1), np.stack([xf, hi], -1)[:, ::-1]], axis=1)
+        out.append((ids, poly))
     return out
 
 
@@ -149,48 +153,53 @@ def write_vtu(sol, path: str | Path) -> None:
     cells = [("triangle", p.nodes[tri])]
     stress = [sol.stress[tri]]
     kind = [p.kind[tri].astype(np.int32)]
-    curved = np.flatnonzero(p.kind != 0)
     points, pdisp = [pts], [disp]
-    if len(curved):
-        outlines = piece_outlines(p)
-        pid = np.unique(p.slabs.piece)
-        by_size: dict[int, list[int]] = {}
-        for j, o in enumerate(outlines):
-            by_size.setdefault(len(o), []).append(j)
-        base = len(pts)
-        for size, js in by_size.items():
-            poly = np.concatenate([outlines[j] for j in js])
-            ids = base + np.arange(len(poly)).reshape(len(js), size)
-            base += len(poly)
-            points.append(poly)
-            pdisp.append(nearest_node_values(sol, poly, np.repeat(p.body[pid[js]], size), disp))
-            cells.append(("polygon", ids))
-            stress.append(sol.stress[pid[js]])
-            kind.append(p.kind[pid[js]].astype(np.int32))
+    base = len(pts)
+    for ids, poly in piece_outlines(p):
+        m, v = poly.shape[:2]
+        xy = poly.reshape(-1, 2)
+        points.append(xy)
+        pdisp.append(nearest_node_values(sol, xy, np.repeat(p.body[ids], v), disp))
+        cells.append(("polygon", base + np.arange(m * v).reshape(m, v)))
+        base += m * v
+        stress.append(sol.stress[ids])
+        kind.append(p.kind[ids].astype(np.int32))
     P = np.concatenate(points)
     D = np.concatenate(pdisp)
     mesh = meshio.Mesh(np.c_[P, np.zeros(len(P))], cells,
                        point_data={"displacement": np.c_[D, np.zeros(len(D))]},
                        cell_data={"stress": stress, "piece_kind": kind})
-    with atomic_path(path) as tmp:
-        meshio.write(tmp, mesh, file_format="vtu")
+    meshio.write(path, mesh, file_format="vtu")
 
 
 def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
-    """Write every output of ``sol`` to directory ``out``; return the paths written."""
+    """Write every output of ``sol`` to directory ``out``; return the paths written.
+
+    All files are written to temporaries first and renamed into place only when every one of
+    them succeeded: a failure leaves the previous set of outputs (or none), never a mix."""
     out = prepare_dir(out)
-    written = []
+    writers = {
+        "summary.json": lambda p: p.write_text(json.dumps(_jsonable(sol.summary()), indent=2) + "\n"),
+        "contact.csv": lambda p: contact_table(sol).to_csv(p, index=False, float_format="%.12g"),
+        "solution.vtu": lambda p: write_vtu(sol, p),
+    }
+    if plots:
+        from .plots import PLOTS
+        writers.update({name: (lambda p, f=f: f(sol, p)) for name, f in PLOTS.items()})
+    staged: list[tuple[Path, Path]] = []
     try:
-        atomic_write_json(out / "summary.json", sol.summary())
-        written.append(out / "summary.json")
-        with atomic_path(out / "contact.csv") as tmp:
-            contact_table(sol).to_csv(tmp, index=False, float_format="%.12g")
-        written.append(out / "contact.csv")
-        write_vtu(sol, out / "solution.vtu")
-        written.append(out / "solution.vtu")
-        if plots:
-            from .plots import plot_all
-            written += plot_all(sol, out)
-    except OSError as e:
-        raise OutputError(f"cannot write outputs to {str(out)!r} ({e.strerror or e}); choose a writable --out") from None
-    return written
+        for name, write in writers.items():
+            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
+            os.close(fd)
+            staged.append((Path(tmp), out / name))
+            write(Path(tmp))
+            os.chmod(tmp, 0o666 & ~_UMASK)
+        for tmp, final in staged:
+            os.replace(tmp, final)
+    except Exception as e:  # noqa: BLE001 - any failure: remove the temporaries, keep the old set
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)
+        what = e.strerror if isinstance(e, OSError) and e.strerror else f"{type(e).__name__}: {e}"
+        raise OutputError(f"cannot write outputs to {str(out)!r} ({what}); nothing was changed there; "
+                          "choose a writable --out") from None
+    return [final for _, final in staged]

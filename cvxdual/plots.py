@@ -7,34 +7,42 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
-from .output import atomic_path, nearest_node_values, piece_outlines  # noqa: E402
+from .output import nearest_node_values, piece_outlines  # noqa: E402
 
 MAX_EDGES = 60000  # above this, the deformed plot shows colours instead of every edge
 
 
-def _polys(sol, scale: float = 0.0):
-    """Outlines of all pieces (triangles, then curved pieces) and their piece indices,
-    displaced by ``scale`` times the displacement."""
+def _polys(sol, scale: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Groups ``(piece ids, polygons (m, v, 2))`` of all pieces (triangles, then curved pieces
+    by number of vertices), displaced by ``scale`` times the displacement."""
     p = sol.system.pieces
-    tri = p.tri_vertices
     disp = sol.displacement
+    tri = p.tri_vertices
     if scale:
         tri = tri + scale * disp[p.nodes[p.tri_piece]]
-    polys = list(tri)
-    ids = list(p.tri_piece)
-    if len(p.slabs):
-        outl = piece_outlines(p)
-        pid = np.unique(p.slabs.piece)
+    groups = [(p.tri_piece, tri)]
+    for ids, poly in piece_outlines(p):
         if scale:
-            outl = [o + scale * nearest_node_values(sol, o, np.full(len(o), p.body[i]), disp)
-                    for o, i in zip(outl, pid)]
-        polys += outl
-        ids += list(pid)
-    return polys, np.asarray(ids)
+            m, v = poly.shape[:2]
+            poly = poly + scale * nearest_node_values(sol, poly.reshape(-1, 2), np.repeat(p.body[ids], v),
+                                                      disp).reshape(m, v, 2)
+        groups.append((ids, poly))
+    return groups
+
+
+def _collections(groups, values=None, **kw) -> list[PolyCollection]:
+    cols = []
+    for ids, poly in groups:
+        pc = PolyCollection(poly, **kw)
+        if values is not None:
+            pc.set_array(values[ids])
+        cols.append(pc)
+    return cols
 
 
 def _figsize(sol, panels: int = 1) -> tuple[float, float]:
@@ -45,9 +53,10 @@ def _figsize(sol, panels: int = 1) -> tuple[float, float]:
 
 
 def _save(fig, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=130, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -59,11 +68,12 @@ def plot_stress(sol, path: Path) -> Path:
     L, S = _units(sol)
     t = sol.stress
     tau = np.sqrt(((t[:, 0] - t[:, 1]) / 2) ** 2 + t[:, 2] ** 2)
-    polys, ids = _polys(sol)
+    groups = _polys(sol)
     fig, axes = plt.subplots(1, 2, figsize=_figsize(sol, 2), constrained_layout=True)
     for ax, val, title in ((axes[0], t[:, 1], "s22 (contact direction)"), (axes[1], tau, "max shear")):
-        pc = PolyCollection(polys, array=val[ids], cmap="viridis", edgecolors="face", linewidths=0.1)
-        ax.add_collection(pc)
+        norm = matplotlib.colors.Normalize(val.min(), val.max())
+        for pc in _collections(groups, val, cmap="viridis", norm=norm, edgecolors="face", linewidths=0.1):
+            ax.add_collection(pc)
         ax.autoscale_view()
         ax.set_aspect("equal")
         for bm in sol.mesh.bodies:
@@ -92,17 +102,17 @@ def deformation_scale(sol) -> float:
 def plot_deformed(sol, path: Path) -> Path:
     L, _ = _units(sol)
     k = deformation_scale(sol)
-    pts = sol.mesh.points
     disp = sol.displacement
-    polys, ids = _polys(sol, k)
+    groups = _polys(sol, k)
     fig, ax = plt.subplots(figsize=_figsize(sol), constrained_layout=True)
-    if len(polys) * 3 <= MAX_EDGES:
-        ax.add_collection(PolyCollection(polys, facecolors="none", edgecolors="k", linewidths=0.3))
+    if sol.system.n_pieces * 3 <= MAX_EDGES:
+        for pc in _collections(groups, facecolors="none", edgecolors="k", linewidths=0.3):
+            ax.add_collection(pc)
     else:
-        mag = np.linalg.norm(disp, axis=1)
-        pc = PolyCollection(polys, array=mag[sol.system.pieces.nodes[ids, 0]], cmap="magma",
-                            edgecolors="face", linewidths=0.0)
-        ax.add_collection(pc)
+        mag = np.linalg.norm(disp, axis=1)[sol.system.pieces.nodes[:, 0]]
+        norm = matplotlib.colors.Normalize(mag.min(), mag.max())
+        for pc in _collections(groups, mag, cmap="magma", norm=norm, edgecolors="face", linewidths=0.0):
+            ax.add_collection(pc)
         fig.colorbar(pc, ax=ax, shrink=0.8, label=f"|u| [{L}]")
     for bm in sol.mesh.bodies:
         ax.add_collection(LineCollection([body_outline(bm.body)], colors="tab:blue", linewidths=0.8,
@@ -134,6 +144,4 @@ def plot_pressure(sol, path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_all(sol, out: Path) -> list[Path]:
-    return [plot_stress(sol, out / "stress.png"), plot_deformed(sol, out / "deformed.png"),
-            plot_pressure(sol, out / "pressure.png")]
+PLOTS = {"stress.png": plot_stress, "deformed.png": plot_deformed, "pressure.png": plot_pressure}

@@ -23,16 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from .errors import SceneError
-
-
-def _num(kind: str, name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise SceneError(f"{kind} profile: '{name}' must be a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise SceneError(f"{kind} profile: '{name}' must be finite, got {value!r}")
-    return v
+from .validate import number, table
 
 
 @dataclass(frozen=True)
@@ -43,7 +34,7 @@ class Profile:
 
     def __post_init__(self):
         for f in fields(self):
-            object.__setattr__(self, f.name, _num(self.kind, f.name, getattr(self, f.name)))
+            object.__setattr__(self, f.name, number(getattr(self, f.name), f"{self.kind} profile: '{f.name}'"))
 
     def value(self, x):
         raise NotImplementedError
@@ -234,9 +225,7 @@ PROFILE_KINDS: dict[str, type[Profile]] = {
 
 def profile_from_dict(d: dict, where: str) -> Profile:
     """Build a profile from a scene-file table such as ``{kind = "parabola", R = 50}``."""
-    if not isinstance(d, dict):
-        raise SceneError(f"{where}: expected a table like {{kind = \"flat\", y0 = 0}}, got {d!r}")
-    d = dict(d)
+    d = dict(table(d, where))
     kind = d.pop("kind", None)
     if kind not in PROFILE_KINDS:
         raise SceneError(f"{where}: unknown profile kind {kind!r}; choose one of {sorted(PROFILE_KINDS)}")

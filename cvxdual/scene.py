@@ -27,20 +27,11 @@ import numpy as np
 from .errors import SceneError
 from .materials import Material
 from .profiles import Flat, Profile
+from .validate import integer, number, pair
 
 SIDES = ("face", "far", "left", "right")
 PART_KINDS = ("clamped", "sliding", "traction")
 POSITIONS = ("upper", "lower")
-
-
-def _pair(value, what: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise SceneError(f"{what} must be a pair of numbers [lo, hi], got {value!r}") from None
-    if not (np.isfinite(a) and np.isfinite(b)):
-        raise SceneError(f"{what} must be finite, got {value!r}")
-    return a, b
 
 
 @dataclass(frozen=True)
@@ -53,7 +44,7 @@ class Traction:
     def __post_init__(self):
         if self.kind not in ("uniform", "exact"):
             raise SceneError(f"traction kind must be 'uniform' or 'exact', got {self.kind!r}")
-        object.__setattr__(self, "value", _pair(self.value, "traction value"))
+        object.__setattr__(self, "value", pair(self.value, "traction value"))
 
 
 @dataclass(frozen=True)
@@ -76,7 +67,7 @@ class BoundaryPart:
             raise SceneError(f"boundary part {self.name!r}: a traction part needs a 'traction' "
                              "(and only traction parts have one)")
         if self.interval is not None:
-            lo, hi = _pair(self.interval, f"boundary part {self.name!r} interval")
+            lo, hi = pair(self.interval, f"boundary part {self.name!r} interval")
             if not lo < hi:
                 raise SceneError(f"boundary part {self.name!r}: interval must have lo < hi, got {self.interval}")
             object.__setattr__(self, "interval", (lo, hi))
@@ -101,17 +92,18 @@ class Body:
     def __post_init__(self):
         if self.position not in POSITIONS:
             raise SceneError(f"body {self.name!r}: position must be 'upper' or 'lower', got {self.position!r}")
-        x0, x1 = _pair(self.x_range, f"body {self.name!r} x range")
+        x0, x1 = pair(self.x_range, f"body {self.name!r} x range")
         if not x0 < x1:
             raise SceneError(f"body {self.name!r}: x range must have x0 < x1, got {self.x_range}")
         object.__setattr__(self, "x_range", (x0, x1))
-        object.__setattr__(self, "body_force", _pair(self.body_force, f"body {self.name!r} body_force"))
-        far = float(self.far)
-        if not np.isfinite(far):
-            raise SceneError(f"body {self.name!r}: far must be finite, got {self.far!r}")
+        object.__setattr__(self, "body_force", pair(self.body_force, f"body {self.name!r} body_force"))
+        far = number(self.far, f"body {self.name!r}: far")
         object.__setattr__(self, "far", far)
-        if int(self.layers) != self.layers or self.layers < 1:
-            raise SceneError(f"body {self.name!r}: layers must be a positive integer, got {self.layers!r}")
+        integer(self.layers, f"body {self.name!r}: layers", minimum=1)
+        if not isinstance(self.face, Profile):
+            raise SceneError(f"body {self.name!r}: face must be a profile (flat, parabola, circle, cosine)")
+        if not isinstance(self.material, Material):
+            raise SceneError(f"body {self.name!r}: material must be a cvxdual.Material")
         lo, hi = self.face.domain()
         if x0 < lo or x1 > hi:
             raise SceneError(f"body {self.name!r}: its face ({self.face.kind}) is a graph only on "
@@ -127,7 +119,7 @@ class Body:
         if gap.min() <= 0:
             raise SceneError(f"body {self.name!r}: the face crosses the far side y = {far:g}; "
                              f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
-        if self.focus_depth is not None and not (np.isfinite(self.focus_depth) and self.focus_depth > 0):
+        if self.focus_depth is not None and not number(self.focus_depth, f"body {self.name!r}: focus_depth") > 0:
             raise SceneError(f"body {self.name!r}: focus_depth must be positive, got {self.focus_depth!r}")
         for part in self.boundary:
             if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
@@ -157,20 +149,18 @@ class ExactSpec:
 
     def __post_init__(self):
         if self.kind == "uniform":
-            if self.stress is None or len(self.stress) != 3:
+            if self.stress is None or isinstance(self.stress, str) or len(self.stress) != 3:
                 raise SceneError("exact field 'uniform' needs stress = [s11, s22, s12]")
-            s = tuple(float(v) for v in self.stress)
-            if not np.all(np.isfinite(s)):
-                raise SceneError("exact field 'uniform': stress must be finite")
-            object.__setattr__(self, "stress", s)
+            object.__setattr__(self, "stress", tuple(number(v, "exact field stress") for v in self.stress))
         elif self.kind == "hertz":
             for name in ("R", "load"):
                 v = getattr(self, name)
-                if v is None or not np.isfinite(float(v)) or float(v) <= 0:
+                if v is None or number(v, f"exact field 'hertz' {name}") <= 0:
                     raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
             raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {self.kind!r}")
+        object.__setattr__(self, "xc", number(self.xc, "exact field xc"))
 
 
 @dataclass(frozen=True)
@@ -184,14 +174,12 @@ class MeshSpec:
     default_level: int = 3
 
     def __post_init__(self):
-        if int(self.columns) != self.columns or self.columns < 1:
-            raise SceneError(f"mesh columns must be a positive integer, got {self.columns!r}")
-        if not (np.isfinite(self.grading) and self.grading >= 1):
+        integer(self.columns, "mesh columns", minimum=1)
+        if not number(self.grading, "mesh grading") >= 1:
             raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {self.grading!r}")
-        if int(self.default_level) != self.default_level or self.default_level < 0:
-            raise SceneError(f"mesh default_level must be a non-negative integer, got {self.default_level!r}")
+        integer(self.default_level, "mesh default_level", minimum=0)
         if self.focus is not None:
-            lo, hi = _pair(self.focus, "mesh focus")
+            lo, hi = pair(self.focus, "mesh focus")
             if not lo <= hi:
                 raise SceneError(f"mesh focus must have lo <= hi, got {self.focus}")
             object.__setattr__(self, "focus", (lo, hi))
@@ -225,7 +213,7 @@ class Scene:
         if not ov[0] < ov[1]:
             raise SceneError(f"the bodies' x ranges {up.x_range} and {lo.x_range} do not overlap; "
                              "there is no candidate contact interval")
-        a, b = ov if self.contact is None else _pair(self.contact, "contact interval")
+        a, b = ov if self.contact is None else pair(self.contact, "contact interval")
         if not (ov[0] - 1e-12 * abs(ov[1] - ov[0]) <= a < b <= ov[1] + 1e-12 * abs(ov[1] - ov[0])):
             raise SceneError(f"the contact interval [{a:g}, {b:g}] must lie in both bodies' x ranges "
                              f"(overlap [{ov[0]:g}, {ov[1]:g}])")
@@ -281,10 +269,6 @@ class Scene:
         x0, x1 = self.x_extent
         heights = [float(np.max(b.height(np.linspace(*b.x_range, 101)))) for b in self.bodies]
         return max(x1 - x0, *heights)
-
-    def with_(self, **changes) -> "Scene":
-        """A copy with some fields replaced (validated again)."""
-        return replace(self, **changes)
 
 
 def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, str]) -> Scene:

@@ -17,6 +17,7 @@ from .errors import SceneError
 from .materials import Material
 from .profiles import profile_from_dict
 from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
+from .validate import integer, number, table
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
@@ -44,12 +45,26 @@ def _read_builtin(name: str) -> dict:
     return tomllib.loads(resources.files("cvxdual.data").joinpath(f"{name}.toml").read_text())
 
 
+def _replaces(base: dict, over: dict) -> bool:
+    """A table that changes what the base table *is* replaces it instead of merging: a profile
+    or traction of another ``kind`` (their parameters depend on the kind), or a material
+    switching between ``E``/``nu`` and ``hooke``."""
+    if "kind" in over and "kind" in base and over["kind"] != base["kind"]:
+        return True
+    mat = {"E", "nu", "hooke"}
+    return bool(set(over) & mat) and ("hooke" in over) != ("hooke" in base)
+
+
 def merge(base: dict, over: dict) -> dict:
-    """Deep merge: tables merge key by key, everything else is replaced."""
+    """Deep merge: tables merge key by key (unless :func:`_replaces`), everything else is replaced.
+    A boundary part whose kind changes keeps only its place (``on``, ``interval``) from the base."""
     out = copy.deepcopy(base)
     for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = merge(out[k], v)
+        b = out.get(k)
+        if isinstance(v, dict) and isinstance(b, dict) and "on" in b and v.get("kind", b.get("kind")) != b.get("kind"):
+            out[k] = {**{key: b[key] for key in ("on", "interval") if key in b}, **copy.deepcopy(v)}
+        elif isinstance(v, dict) and isinstance(b, dict) and not _replaces(b, v):
+            out[k] = merge(b, v)
         else:
             out[k] = copy.deepcopy(v)
     return out
@@ -98,9 +113,10 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
     return scene_from_dict(data)
 
 
-def _check_keys(d, allowed: set[str], where: str) -> dict:
-    if not isinstance(d, dict):
-        raise SceneError(f"{where}: expected a table, got {d!r}")
+def _check_keys(d, allowed: set[str] | None, where: str) -> dict:
+    table(d, where)
+    if allowed is None:
+        return d
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise SceneError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(allowed))}")
@@ -113,19 +129,13 @@ def _need(d: dict, key: str, where: str):
     return d[key]
 
 
-def _int(v, where: str) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise SceneError(f"{where} must be an integer, got {v!r}")
-    return v
-
-
 def scene_from_dict(data: dict) -> Scene:
     _check_keys(data, TOP_KEYS, "scene")
     plane = data.get("plane", "strain")
     units = data.get("units", ["m", "Pa"])
     if not (isinstance(units, list) and len(units) == 2 and all(isinstance(u, str) for u in units)):
         raise SceneError(f"scene: units must be [length, stress] names, e.g. [\"mm\", \"MPa\"], got {units!r}")
-    bodies_d = _check_keys(_need(data, "bodies", "scene"), set(_need(data, "bodies", "scene")), "bodies")
+    bodies_d = _check_keys(_need(data, "bodies", "scene"), None, "bodies")
     bodies = tuple(_body(name, bd, plane) for name, bd in bodies_d.items())
     contact = _check_keys(data.get("contact", {}), CONTACT_KEYS, "contact")
     gap = profile_from_dict(contact["gap"], "contact.gap") if "gap" in contact else None
@@ -133,20 +143,14 @@ def scene_from_dict(data: dict) -> Scene:
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
         exact = ExactSpec(kind=_need(e, "kind", "exact"), stress=e.get("stress"), R=e.get("R"),
-                          load=e.get("load"), xc=float(e.get("xc", 0.0)))
+                          load=e.get("load"), xc=e.get("xc", 0.0))
     m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
-    mesh = MeshSpec(columns=_int(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
-                    grading=_float(m.get("grading", 1.0), "mesh.grading"),
-                    default_level=_int(m.get("default_level", 3), "mesh.default_level"))
+    mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
+                    grading=number(m.get("grading", 1.0), "mesh.grading"),
+                    default_level=integer(m.get("default_level", 3), "mesh.default_level"))
     return Scene(name=str(data.get("name", "scene")), bodies=bodies,
                  description=str(data.get("description", "")), contact=contact.get("interval"),
                  gap=gap, exact=exact, mesh=mesh, units=tuple(units))
-
-
-def _float(v, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise SceneError(f"{where} must be a number, got {v!r}")
-    return float(v)
 
 
 def _body(name: str, d: dict, plane: str) -> Body:
@@ -161,7 +165,7 @@ def _body(name: str, d: dict, plane: str) -> Body:
         material = Material.isotropic(_need(mat, "E", f"{where}.material"), _need(mat, "nu", f"{where}.material"),
                                       plane=plane)
     parts = []
-    for pname, pd in _check_keys(d.get("boundary", {}), set(d.get("boundary", {})), f"{where}.boundary").items():
+    for pname, pd in _check_keys(d.get("boundary", {}), None, f"{where}.boundary").items():
         pw = f"{where}.boundary.{pname}"
         _check_keys(pd, PART_KEYS, pw)
         tr = None
@@ -172,8 +176,8 @@ def _body(name: str, d: dict, plane: str) -> Body:
                                   interval=pd.get("interval"), name=pname))
     focus_depth = d.get("focus_depth")
     return Body(name=name, position=_need(d, "position", where), x_range=_need(d, "x", where),
-                far=_float(_need(d, "far", where), f"{where}.far"),
+                far=number(_need(d, "far", where), f"{where}.far"),
                 face=profile_from_dict(_need(d, "face", where), f"{where}.face"),
                 material=material, boundary=tuple(parts), body_force=d.get("body_force", (0.0, 0.0)),
-                layers=_int(d.get("layers", 4), f"{where}.layers"),
-                focus_depth=None if focus_depth is None else _float(focus_depth, f"{where}.focus_depth"))
+                layers=integer(d.get("layers", 4), f"{where}.layers"),
+                focus_depth=None if focus_depth is None else number(focus_depth, f"{where}.focus_depth"))

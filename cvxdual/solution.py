@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from .assembly import System, assemble
 from .dual import DualModel, admissibility
-from .errors import AccuracyError
+from .errors import AccuracyError, SceneError
 from .exact import exact_field
 from .norms import VOIGT_WEIGHT, stress_error
 from .scene import Scene
@@ -26,7 +27,8 @@ from .triangulation import check_triangulation, discretize
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
 # about 100 on the built-in scenes; first-order solvers may fail them and are then rejected.
-TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6}
+TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6,
+              "duality_gap": 1e-6}
 
 ACTIVE_TOL = 1e-6  # a pair is active when its force exceeds this fraction of the largest
 FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
@@ -96,9 +98,9 @@ class Solution:
         }
 
 
-def contact_quantities(system: System, t: np.ndarray, u: np.ndarray) -> dict:
-    """Nodal contact forces, pressures, gaps and the active set."""
-    R, _ = admissibility(system, t)
+def contact_quantities(system: System, R: np.ndarray, u: np.ndarray) -> dict:
+    """Nodal contact forces, pressures, gaps and the active set, from the residual
+    ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``."""
     force = -R[system.jb]
     up, lo = system.mesh.pairs.T
     rel = u[2 * lo + 1] - u[2 * up + 1]
@@ -118,7 +120,7 @@ def contact_quantities(system: System, t: np.ndarray, u: np.ndarray) -> dict:
     }
 
 
-def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict) -> dict:
+def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=None) -> dict:
     """Relative residuals of a dual solution ``t`` with recovered displacements ``u``.
 
     - equilibrium: largest violation of ``(T^T R)_j = 0`` (``j`` in ``J0``) and
@@ -132,24 +134,27 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict) -> di
     forces, ``1e-3 F_ref`` for the total contact force) so that a solution with (almost) no
     contact is not judged on rounding noise.
     """
-    R, scale = admissibility(system, t)
+    R, scale = admissibility(system, t) if adm is None else adm
     f_ref = load_scale(system)
     Ry = system.T().T @ R
     viol = np.abs(Ry)
     viol[system.jb] = np.maximum(Ry[system.jb], 0.0)
     eq = float(viol.max() / max(scale.max(), 1e-6 * f_ref)) if len(viol) else 0.0
+    sc = system.scales
     tu = system.stresses_from_displacement(u)
     a = system.pieces.area[:, None]
     num = np.sqrt(np.sum(a * VOIGT_WEIGHT * (t - tu) ** 2))
     den = np.sqrt(np.sum(a * VOIGT_WEIGHT * t**2))
-    cons = float(num / den) if den > 0 else float(num)
+    # floors: the problem's own stress and displacement scales (an unloaded scene has t = u = 0)
+    cons = float(num / max(den, 1e-12 * sc.stress * sc.length))
     s = contact["gap"] - contact["relative_displacement"]
-    delta = max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), 1e-300)
+    delta = max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), sc.displacement)
     F = contact["force"]
     fsum = max(float(np.abs(F).sum()), FORCE_FLOOR * f_ref)
     comp = float(np.sum(np.abs(F * s)) / (fsum * delta))
     pen = float(max(0.0, -s.min()) / delta) if len(s) else 0.0
-    return {"equilibrium": eq, "constitutive": cons, "complementarity": comp, "penetration": pen}
+    return {"equilibrium": eq, "constitutive": cons, "complementarity": comp, "penetration": pen,
+            "duality_gap": duality_gap(system, t, u)}
 
 
 def dual_objective(system: System, t: np.ndarray) -> float:
@@ -158,12 +163,14 @@ def dual_objective(system: System, t: np.ndarray) -> float:
     return 0.5 * float(tv @ (system.Ah @ tv)) - float(tv @ (system.E.T @ system.q0))
 
 
-def duality_gap(system: System, t: np.ndarray, u: np.ndarray, objective: float) -> float:
+def duality_gap(system: System, t: np.ndarray, u: np.ndarray) -> float:
     """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy (MATH.md section 2)."""
     tv = t.ravel()
     energy = 0.5 * float(tv @ (system.Ah @ tv))
+    objective = energy - float(tv @ (system.E.T @ system.q0))
+    sc = system.scales
     val = system.energy(u) + float(system.f @ system.q0) + objective
-    return abs(val) / max(energy, abs(objective), 1e-300)
+    return abs(val) / max(energy, abs(objective), 1e-12 * sc.stress**2 * sc.length**2 / sc.modulus)
 
 
 def build_model(scene: Scene, triangulation: str = "type1", level: int | None = None) -> DualModel:
@@ -180,6 +187,11 @@ def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
     ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
     :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
     """
+    if not isinstance(scene, Scene):
+        from .scenefile import load_scene
+        if not isinstance(scene, (str, Path, dict)):
+            raise SceneError(f"solve() needs a Scene, a built-in scene name or a .toml path, got {type(scene).__name__}")
+        scene = load_scene(scene)
     solver = resolve_solver(solver)
     triangulation = check_triangulation(triangulation)
     level = scene.mesh.default_level if level is None else level
@@ -188,11 +200,20 @@ def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
     t1 = time.perf_counter()
     system = assemble(mesh, pieces, ties)
     t2 = time.perf_counter()
-    if solver == FAST:
+    if not np.any(system.f) and np.all(system.eps >= 0):
+        # nothing acts (no load, no interference): lam = 0 is admissible and S(lam) >= S(0) for
+        # every admissible lam (contact forces are compressive, gaps >= 0), so it is the solution
+        t3 = t4 = time.perf_counter()
+        zero = np.zeros(system.n_dofs)
+        info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
+        sol = make_solution(system, np.zeros((system.n_pieces, 3)), zero, triangulation, level, info, check)
+        build, solve_time = 0.0, 0.0
+    elif solver == FAST:
         from .fast import cascade, solve_fast
         active = cascade(scene, triangulation, level, mesh.pair_x) if warm_start else None
         t3 = time.perf_counter()
         u, info = solve_fast(system, active)
+        info["warm_start_time"] = t3 - t2  # counted in "solve": it is part of the fast path's work
         t4 = time.perf_counter()
         sol = make_solution(system, system.stresses_from_displacement(u), u, triangulation, level, info, check)
         build, solve_time = 0.0, t4 - t2
@@ -221,15 +242,15 @@ def make_solution(system: System, t: np.ndarray, u: np.ndarray, triangulation: s
                   check: bool = True) -> Solution:
     """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and displacements ``u``."""
     scene = system.mesh.scene
-    contact = contact_quantities(system, t, u)
-    res = residuals(system, t, u, contact)
+    adm = admissibility(system, t)
+    contact = contact_quantities(system, adm[0], u)
+    res = residuals(system, t, u, contact, adm)
     objective = dual_objective(system, t)
-    gap = duality_gap(system, t, u, objective)
     exact = exact_field(scene)
     error = stress_error(system, t, exact.stress) if exact is not None else None
     sol = Solution(scene=scene, triangulation=triangulation, level=level, system=system, stress=t,
                    displacement=u.reshape(-1, 2), solver=info, timings={}, objective=objective,
-                   duality_gap=gap, residuals=res, contact=contact,
+                   duality_gap=res["duality_gap"], residuals=res, contact=contact,
                    exact=exact.data() if exact is not None else None, error=error)
     if check:
         check_solution(sol)
@@ -240,5 +261,9 @@ def check_solution(sol: Solution) -> None:
     bad = {k: v for k, v in sol.residuals.items() if v > TOLERANCES[k]}
     if bad:
         txt = ", ".join(f"{k} {v:.2e} > {TOLERANCES[k]:.0e}" for k, v in bad.items())
-        raise AccuracyError(f"solver {sol.solver.get('solver')} returned 'optimal' but the solution fails "
-                            f"the accuracy checks ({txt}); try CLARABEL or a coarser mesh")
+        name = str(sol.solver.get("solver"))
+        advice = ("try --solver fast, or a coarser mesh" if name.upper() == "CLARABEL"
+                  else "report it: the active-set result should be exact" if name == "fast"
+                  else "try CLARABEL (interior point) or --solver fast")
+        raise AccuracyError(f"solver {name} returned 'optimal' but the solution fails the accuracy checks "
+                            f"({txt}); {advice}")

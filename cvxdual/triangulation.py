@@ -48,9 +48,11 @@ def check_triangulation(name: str) -> str:
 
 
 def break_points(scene: Scene, body: Body) -> np.ndarray:
-    """Ends of the face stretches of ``body``: its ends, the contact ends, inflexion points."""
+    """Ends of the face stretches of ``body``: its ends, the contact ends, the other body's
+    ends (columns both bodies need) and the inflexion points."""
     x0, x1 = body.x_range
-    pts = [x0, x1, *(c for c in scene.contact if x0 < c < x1), *body.face.inflexions(x0, x1)]
+    ends = [*scene.contact, *(v for b in scene.bodies for v in b.x_range)]
+    pts = [x0, x1, *(c for c in ends if x0 < c < x1), *body.face.inflexions(x0, x1)]
     return np.unique(pts)
 
 
@@ -90,7 +92,9 @@ def discretize(scene: Scene, triangulation: str = "type1", level: int | None = N
     node pairs ``(tied, master)`` or ``None``."""
     tri = check_triangulation(triangulation)
     level = check_level(scene.mesh.default_level if level is None else level)
-    extra = np.concatenate([break_points(scene, b) for b in scene.bodies])
+    intervals = [v for b in scene.bodies for part in b.boundary
+                 if part.interval is not None and part.on in ("face", "far") for v in part.interval]
+    extra = np.concatenate([*(break_points(scene, b) for b in scene.bodies), intervals])
     cols = column_abscissae(scene, level, extra)
     polygons: list[list] = [[], []]
     face_y = [None, None]

@@ -64,21 +64,23 @@ def test_scene_file_with_base(tmp_path, capsys):
     assert "scene soft" in capsys.readouterr().out
 
 
-def test_existing_file_kept_when_writing_fails(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), ValueError("a meshio bug")])
+def test_old_outputs_kept_when_writing_fails(tmp_path, monkeypatch, capsys, error):
     out = tmp_path / "o"
     assert main(["solve", "--scene", "patch", "--level", "0", "--out", str(out), "--no-plots"]) == 0
-    before = (out / "solution.vtu").read_bytes()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
 
     def boom(path, *a, **k):
         with open(path, "wb") as fh:
             fh.write(b"half a file")
-        raise OSError(28, "No space left on device")
+        raise error
 
     monkeypatch.setattr(meshio, "write", boom)
     assert main(["solve", "--scene", "patch", "--level", "1", "--out", str(out), "--no-plots"]) == 1
-    assert "No space left" in capsys.readouterr().err
-    assert (out / "solution.vtu").read_bytes() == before  # the old file, not half a new one
-    assert not list(out.glob(".*"))
+    err = capsys.readouterr().err
+    assert err.startswith("cvxdual: error: cannot write outputs") and len(err.strip().splitlines()) == 1
+    # the whole previous set is intact (summary.json is written before the VTU): no mix of runs
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
 BAD = [
@@ -123,3 +125,39 @@ def test_unwritable_output(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not a directory" in err
     assert blocker.read_text() == "x"
+
+
+GEOMETRY_BAD = [
+    # the cylinder's circle (R = 50) is a graph only on [-50, 50]: a body wider than that
+    (["--scene", "cylinder-on-block", "--set", "bodies.cylinder.x=[-60.0, 20.0]"], "is a graph only on"),
+    # bodies side by side: no candidate contact interval
+    (["--scene", "blocks", "--set", "bodies.upper.x=[20.0, 30.0]"], "do not overlap"),
+    # the far side below the face of the upper body
+    (["--scene", "blocks", "--set", "bodies.upper.far=-1.0"], "crosses the far side"),
+    # a non-positive-definite Hooke matrix (replaces E and nu)
+    (["--scene", "patch", "--set", "bodies.top.material={hooke=[[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]}"],
+     "not positive definite"),
+    (["--scene", "patch", "--set", "bodies.top.body_force=[0.0, nan]"], "finite"),
+    (["--scene", "patch", "--set", "exact.stress=[0.0, inf, 0.0]"], "finite"),
+    # a groove too curved for type 1's first layer at level 0
+    (["--scene", "cylinder-in-groove", "--set", "bodies.groove.face.R=26.0", "--set", "bodies.groove.face.yc=26.0"],
+     "bulges through the first element layer"),
+]
+
+
+@pytest.mark.parametrize("args,words", GEOMETRY_BAD, ids=[w for _, w in GEOMETRY_BAD])
+def test_bad_geometry_one_line_error_nothing_written(tmp_path, capsys, args, words):
+    out = tmp_path / "out"
+    assert main(["solve", "--level", "0", *args, "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("cvxdual: error:") and len(err.strip().splitlines()) == 1
+    assert words in err
+    assert not out.exists()
+
+
+def test_hooke_material_from_the_command_line(tmp_path, capsys):
+    from cvxdual.materials import Material
+    C = Material.isotropic(70000.0, 0.3).stiffness.tolist()
+    assert main(["solve", "--scene", "patch", "--level", "0", "--no-output",
+                 "--set", f"bodies.top.material={{hooke={C}}}"]) == 0
+    assert "optimal" in capsys.readouterr().out

@@ -50,3 +50,27 @@ def test_no_contact_at_all():
         assert abs(sol.contact["total_force"]) < 1e-9 * 200.0
         opening = sol.contact["gap"] - sol.contact["relative_displacement"]
         assert opening.min() > 0.009
+
+
+def test_fast_path_with_a_free_rotating_body():
+    # the upper block is loaded on top, not clamped: it may translate in x (floating: no
+    # friction) and in y and rotate (separating): the fast path must keep enough pairs active
+    sc = cd.load_scene("blocks", [{"bodies": {
+        "upper": {"boundary": {"top": {"kind": "traction", "traction": {"kind": "uniform", "value": [0.0, -50.0]}}}},
+        "lower": {"boundary": {"push": {"kind": "clamped"}}}}}])
+    a = cd.solve(sc, level=2)
+    assert a.system.floating.shape[1] == 1 and a.system.separating.shape[1] == 2
+    for warm in (True, False):
+        b = cd.solve(sc, level=2, solver="fast", warm_start=warm)
+        # Clarabel's 1e-8 tolerances against the exact active-set solution
+        assert l2_norm(a.system, a.stress - b.stress) <= 1e-6 * l2_norm(a.system, a.stress)
+    assert a.contact["total_force"] == pytest.approx(50.0 * 20.0, rel=1e-9)
+
+
+def test_unloaded_scene_gives_zero_stress():
+    # zero load and zero gap: the solution is zero; the residuals must not divide noise by zero
+    sc = cd.load_scene("patch", [{"bodies": {"top": {"boundary": {"pressure": {"traction": {"value": [0.0, 0.0]}}}}}}])
+    for solver in ("fast", "CLARABEL"):
+        sol = cd.solve(sc, level=1, solver=solver)
+        assert np.abs(sol.stress).max() < 1e-6  # MPa; 1e-8 of the scene's stress scale
+        assert sol.contact["n_active"] == 0

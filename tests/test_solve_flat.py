@@ -29,6 +29,7 @@ def test_hertz_peak_pressure_and_half_width():
     a, p0 = sol.exact["a"], sol.exact["p0"]
     assert a == pytest.approx(6.21, abs=0.005) and p0 == pytest.approx(3585, abs=0.5)
     c = sol.contact
+    # the acceptance: peak pressure within 3% of p0, half-width within 5% of a
     assert abs(c["max_pressure"] - p0) <= 0.03 * p0
     assert abs(c["x_max"] - a) <= 0.05 * a
     assert c["x_min"] == 0.0
@@ -95,7 +96,6 @@ def test_contact_conditions(scene, level):
 
 
 def test_blocks_contact_zone_grows_with_load():
-    base = cd.load_scene("blocks")
     widths = []
     for p in (10.0, 50.0, 200.0):
         sc = cd.load_scene("blocks", [{"bodies": {"lower": {"boundary": {"push": {"traction": {"value": [0.0, p]}}}}}}])
@@ -103,7 +103,6 @@ def test_blocks_contact_zone_grows_with_load():
         widths.append(sol.contact["x_max"] - sol.contact["x_min"])
         assert sol.contact["total_force"] == pytest.approx(20.0 * p, rel=1e-7)
     assert widths[0] < widths[1] < widths[2]
-    assert base.name == "blocks"
 
 
 def test_units_do_not_change_dimensionless_results():

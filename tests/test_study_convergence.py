@@ -38,10 +38,12 @@ def test_errors_decrease_and_rates(quick):
     r = rates(df).set_index(["scene", "triangulation"])["rate_l2"]
     # P0 stresses: rate at most 1; the square-root contact edges keep Hertz a bit below
     assert 0.5 <= r["hertz", "type1"] <= 1.1
-    # type 1's untested s22 on concave curved triangles: a slower rate on the groove
+    # type 1's untested s22 on concave curved triangles: a slower rate on the groove (measured
+    # 0.93 against 0.62 on the quick levels, 0.94 against 0.58 on the full study)
     assert r["cylinder-in-groove", "type2"] > r["cylinder-in-groove", "type1"] + 0.1
     # without concave stretches the two types are the same triangulation
     assert r["cylinder-on-block", "type1"] == pytest.approx(r["cylinder-on-block", "type2"], abs=1e-12)
+    # every scene and triangulation converges (the slowest measured is 0.6; 0.3 fails a stall)
     for v in r:
         assert v > 0.3
 

@@ -13,9 +13,21 @@ import numpy as np
 from ..output import atomic_path, atomic_write_json, atomic_write_text
 
 
+def code_version() -> str:
+    """A hash of the package's numerical code (``cvxdual/*.py``, not the study runners): cached
+    results are reused only by the code that produced them."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha1()
+    for f in sorted(root.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
+
+
 def scene_key(scene, *extra) -> str:
-    """A short stable hash of a scene (frozen dataclasses have a deterministic repr) and extras."""
-    return hashlib.sha1(repr((scene, *extra)).encode()).hexdigest()[:12]
+    """A short stable hash of a scene (frozen dataclasses have a deterministic repr), extras and
+    the code version."""
+    return hashlib.sha1(repr((scene, *extra, code_version())).encode()).hexdigest()[:12]
 
 
 class Cache:

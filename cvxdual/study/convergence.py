@@ -31,7 +31,7 @@ from ..assembly import assemble
 from ..norms import stress_distance, stress_error
 from ..exact import exact_field
 from ..scenefile import load_scene
-from ..solution import solve
+from ..solution import make_solution, solve
 from ..triangulation import discretize
 from .common import Cache, Progress, fit_rate, md_table, save_fig, scene_key, write_csv, write_text
 
@@ -82,8 +82,9 @@ def reference_field(scene, level: int, cache: Cache, progress: Progress | None =
         stress = hit["stress"]
     else:
         system = assemble(mesh, pieces, ties)
-        u, _ = solve_fast(system, cascade(scene, tri, level, mesh.pair_x))
+        u, info = solve_fast(system, cascade(scene, tri, level, mesh.pair_x))
         stress = system.stresses_from_displacement(u)
+        make_solution(system, stress, u, tri, level, info, check=True)  # residuals within tolerances
         cache.put_array(key, stress=stress)
     if progress is not None:
         progress.step(f"{scene.name} reference {tri} level {level} ({len(pieces)} pieces)",
