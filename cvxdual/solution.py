@@ -30,7 +30,7 @@ from .triangulation import check_triangulation, discretize
 TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6,
               "duality_gap": 1e-6}
 
-ACTIVE_TOL = 1e-6  # a pair is active when its force exceeds this fraction of the largest
+ACTIVE_TOL = 1e-6  # an active pair's force exceeds this fraction of the largest (and its opening)
 FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
 
 
@@ -106,7 +106,11 @@ def contact_quantities(system: System, R: np.ndarray, u: np.ndarray) -> dict:
     rel = u[2 * lo + 1] - u[2 * up + 1]
     pressure = force / system.width
     fmax = max(float(force.max()) if len(force) else 0.0, FORCE_FLOOR * load_scale(system))
-    active = force > ACTIVE_TOL * fmax
+    delta = max(float(np.abs(u).max()), float(np.abs(system.eps).max()), system.scales.displacement)
+    opening = system.eps - rel
+    # complementarity makes force or opening zero; an interior point leaves both small, and the
+    # larger of the two (each relative to its scale) tells the state
+    active = (force > ACTIVE_TOL * fmax) & (force / fmax > opening / delta)
     xs = system.mesh.pair_x[active]
     return {
         "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
