@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import sys
@@ -132,3 +133,17 @@ def md_table(df, floatfmt: str = ".3g") -> str:
                 cells.append(str(v))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def study_main(name: str, doc: str, run, argv=None, quick_help: str = "coarse sizes only") -> int:
+    """The command line every study shares: ``--quick``, ``--out``, ``--cache``, ``--quiet``.
+    The default output is ``reports/`` (``out/NAME-quick`` with ``--quick``)."""
+    p = argparse.ArgumentParser(prog=f"studies/{name}.py", description=doc.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help=quick_help)
+    p.add_argument("--out", default=None, help=f"output directory (default: reports/, or out/{name}-quick)")
+    p.add_argument("--cache", default=".cache/cvxdual", help="cache directory for resuming ('' to disable)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    a = p.parse_args(argv)
+    run(a.out or (f"out/{name}-quick" if a.quick else "reports"), quick=a.quick, cache_dir=a.cache or None,
+        progress=not a.quiet)
+    return 0

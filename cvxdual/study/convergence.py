@@ -18,7 +18,6 @@ coarse levels only (the tests use it).
 
 from __future__ import annotations
 
-import argparse
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +32,7 @@ from ..exact import exact_field
 from ..scenefile import load_scene
 from ..solution import make_solution, solve
 from ..triangulation import discretize
-from .common import Cache, Progress, fit_rate, md_table, save_fig, scene_key, write_csv, write_text
+from .common import Cache, Progress, fit_rate, md_table, save_fig, scene_key, study_main, write_csv, write_text
 
 TRIS = ("type1", "type2")
 
@@ -358,12 +357,4 @@ def _observations(df, all_r, last_r, refs) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="studies/convergence.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="coarse levels only (seconds, not minutes)")
-    p.add_argument("--out", default=None, help="output directory (default: reports/, or out/convergence-quick)")
-    p.add_argument("--cache", default=".cache/cvxdual", help="cache directory for resuming ('' to disable)")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
-    a = p.parse_args(argv)
-    out = a.out or ("out/convergence-quick" if a.quick else "reports")
-    run(out, quick=a.quick, cache_dir=a.cache or None, progress=not a.quiet)
-    return 0
+    return study_main("convergence", __doc__, run, argv, quick_help="coarse levels only (seconds, not minutes)")

@@ -9,7 +9,6 @@ cached (``--cache``) so an interrupted run resumes.
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import io
 import json
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .common import Cache, Progress, fit_rate, md_table, save_fig, scene_key, write_csv, write_text
+from .common import Cache, Progress, fit_rate, md_table, save_fig, scene_key, study_main, write_csv, write_text
 
 CVXPY_TIMEOUT = 600.0  # "as far as the CVXPY path goes in 10 minutes"
 SCAN_SCENE = "hertz"
@@ -449,15 +448,7 @@ def main(argv=None) -> int:
     if argv and argv[0] == "--worker":
         print(json.dumps(measure(json.loads(argv[1])), default=_json_default))
         return 0
-    p = argparse.ArgumentParser(prog="studies/speed.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="small sizes only")
-    p.add_argument("--out", default=None, help="output directory (default: reports/, or out/speed-quick)")
-    p.add_argument("--cache", default=".cache/cvxdual", help="cache directory for resuming ('' to disable)")
-    p.add_argument("--quiet", action="store_true")
-    a = p.parse_args(argv)
-    run(a.out or ("out/speed-quick" if a.quick else "reports"), quick=a.quick, cache_dir=a.cache or None,
-        progress=not a.quiet)
-    return 0
+    return study_main("speed", __doc__, run, argv, quick_help="small sizes only")
 
 
 def _json_default(o):

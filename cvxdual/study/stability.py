@@ -7,7 +7,6 @@ the fast path, the error against the exact field (``hertz`` variants) and the ti
 
 from __future__ import annotations
 
-import argparse
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .common import Cache, Progress, md_table, scene_key, write_csv, write_text
+from .common import Cache, Progress, md_table, scene_key, study_main, write_csv, write_text
 
 TRIS = ("type1", "type2")
 PATHS = ("cvxpy", "fast")
@@ -244,12 +243,4 @@ def _notes(df) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="studies/stability.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="a few cases at level <= 1")
-    p.add_argument("--out", default=None, help="output directory (default: reports/, or out/stability-quick)")
-    p.add_argument("--cache", default=".cache/cvxdual", help="cache directory for resuming ('' to disable)")
-    p.add_argument("--quiet", action="store_true")
-    a = p.parse_args(argv)
-    run(a.out or ("out/stability-quick" if a.quick else "reports"), quick=a.quick, cache_dir=a.cache or None,
-        progress=not a.quiet)
-    return 0
+    return study_main("stability", __doc__, run, argv, quick_help="a few cases at level <= 1")
