@@ -50,23 +50,30 @@ def l2_norm(system: System, t: np.ndarray) -> float:
     return float(np.sqrt(np.sum(system.pieces.area * np.sum(VOIGT_WEIGHT * t**2, axis=1))))
 
 
-def stress_distance(a, b, n: int = 2) -> dict:
+def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
     """``||lam_a - lam_b||`` (L2 and energy) between two solutions of the same scene on different
     meshes, integrated over ``a``'s pieces (``n*n`` points each), every point located in
     ``b``'s pieces; relative measures are against ``a``. Integrate over the finer mesh: both
-    fields are then constant on most of its pieces and the rule is nearly exact."""
-    from .errors import CvxdualError
-    from .locate import locate
+    fields are then constant on most of its pieces and the rule is nearly exact.
+
+    Where the meshes are not nested (curved faces move nodes between levels, type 2 moves the
+    contact polygon), a piece of ``a`` can straddle pieces of ``b`` and the integrand jumps
+    inside it. With ``n_fine``, every piece of ``a`` whose ``n*n`` points fall in more than one
+    piece of ``b`` is integrated again with ``n_fine*n_fine`` points instead."""
     pa = a.pieces
     pts, w, idx = pa.quadrature(n)
-    # Gauss points are interior; the tolerance only absorbs rounding where a's and b's faces
-    # are the same curve evaluated at different points
-    tol = 1e-10 * a.scene.length_scale
+    loc = _locate_in(a, b, pts, idx)
+    if n_fine is not None:
+        lo = np.full(len(pa), np.iinfo(loc.dtype).max, dtype=loc.dtype)
+        hi = np.full(len(pa), -1, dtype=loc.dtype)
+        np.minimum.at(lo, idx, loc)
+        np.maximum.at(hi, idx, loc)
+        straddle = lo != hi
+        keep = ~straddle[idx]
+        fp, fw, fi = pa.quadrature(n_fine, only=straddle)
+        pts, w, idx = np.concatenate([pts[keep], fp]), np.concatenate([w[keep], fw]), np.concatenate([idx[keep], fi])
+        loc = np.concatenate([loc[keep], _locate_in(a, b, fp, fi)])
     body = pa.body[idx]
-    loc = locate(b.mesh, b.pieces, pts, body, tol)
-    if np.any(loc < 0):
-        raise CvxdualError(f"{int(np.sum(loc < 0))} quadrature points of one solution lie outside the "
-                           "other's pieces: the solutions are not of the same scene")
     acc = np.zeros(4)
     for k, bd in enumerate(a.scene.bodies):
         m = np.flatnonzero(body == k)
@@ -74,3 +81,16 @@ def stress_distance(a, b, n: int = 2) -> dict:
             ta = a.stress[idx[m]]
             _accumulate(ta - b.stress[loc[m]], ta, w[m], bd.material.compliance, acc)
     return _result(acc, n)
+
+
+def _locate_in(a, b, pts: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Pieces of ``b`` holding the points ``pts`` of ``a``'s pieces ``idx``."""
+    from .errors import CvxdualError
+    from .locate import locate
+    # Gauss points are interior; the tolerance only absorbs rounding where a's and b's faces
+    # are the same curve evaluated at different points
+    loc = locate(b.mesh, b.pieces, pts, a.pieces.body[idx], 1e-10 * a.scene.length_scale)
+    if np.any(loc < 0):
+        raise CvxdualError(f"{int(np.sum(loc < 0))} quadrature points of one solution lie outside the "
+                           "other's pieces: the solutions are not of the same scene")
+    return loc

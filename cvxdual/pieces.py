@@ -99,25 +99,28 @@ class Pieces:
         return slab_bound(self.slabs, self.faces, x, idx, which)
 
     # -- quadrature --------------------------------------------------------------------
-    def quadrature(self, n: int = 4):
+    def quadrature(self, n: int = 4, only: np.ndarray | None = None):
         """Points ``(m, 2)``, weights ``(m,)`` and piece index ``(m,)`` of a rule with ``n``
-        points per direction on every triangle and slab (``n*n`` points each)."""
+        points per direction on every triangle and slab (``n*n`` points each); ``only`` (a
+        boolean mask over pieces) restricts it to those pieces."""
         rs, w = triangle_rule(n)
-        v = self.tri_vertices
+        tri = np.arange(len(self.tri_piece)) if only is None else np.flatnonzero(only[self.tri_piece])
+        v = self.tri_vertices[tri]
         J = 2.0 * np.abs(p1_strain(v)[1])  # |det| of the affine map
         pts = (v[:, None, 0, :] + rs[None, :, 0, None] * (v[:, None, 1, :] - v[:, None, 0, :])
                + rs[None, :, 1, None] * (v[:, None, 2, :] - v[:, None, 0, :]))
-        P, W, I = [pts.reshape(-1, 2)], [(J[:, None] * w[None, :]).ravel()], [np.repeat(self.tri_piece, len(w))]
+        P, W, I = [pts.reshape(-1, 2)], [(J[:, None] * w[None, :]).ravel()], [np.repeat(self.tri_piece[tri], len(w))]
         if len(self.slabs):
-            sp, sw, si = self._slab_rule(n)
+            sp, sw, si = self._slab_rule(n, only)
             P.append(sp), W.append(sw), I.append(si)
         return np.concatenate(P), np.concatenate(W), np.concatenate(I)
 
-    def _slab_rule(self, n: int):
+    def _slab_rule(self, n: int, only: np.ndarray | None = None):
         s = self.slabs
         u, wu = gauss01(n)
-        m = len(s)
-        idx = np.repeat(np.arange(m), n)
+        sel = np.arange(len(s)) if only is None else np.flatnonzero(only[s.piece])
+        m = len(sel)
+        idx = np.repeat(sel, n)
         x = s.xl[idx] + np.tile(u, m) * (s.xr - s.xl)[idx]
         wx = np.tile(wu, m) * (s.xr - s.xl)[idx]
         lo, hi = self._bound(x, idx, "lo"), self._bound(x, idx, "hi")
