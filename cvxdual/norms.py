@@ -64,11 +64,10 @@ def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
     pts, w, idx = pa.quadrature(n)
     loc = _locate_in(a, b, pts, idx)
     if n_fine is not None:
-        lo = np.full(len(pa), np.iinfo(loc.dtype).max, dtype=loc.dtype)
-        hi = np.full(len(pa), -1, dtype=loc.dtype)
-        np.minimum.at(lo, idx, loc)
-        np.maximum.at(hi, idx, loc)
-        straddle = lo != hi
+        some = np.empty(len(pa), dtype=loc.dtype)
+        some[idx] = loc  # one of each piece's hosts; a piece straddles if any point differs
+        straddle = np.zeros(len(pa), bool)
+        straddle[idx[loc != some[idx]]] = True
         keep = ~straddle[idx]
         fp, fw, fi = pa.quadrature(n_fine, only=straddle)
         pts, w, idx = np.concatenate([pts[keep], fp]), np.concatenate([w[keep], fw]), np.concatenate([idx[keep], fi])

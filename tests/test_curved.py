@@ -245,8 +245,7 @@ def test_type2_with_unequal_body_ranges():
 
 
 def test_quadrature_on_a_subset_of_pieces():
-    sol = cd.solve(cd.load_scene("cylinder-in-groove"), "type2", 1, "fast")
-    p = sol.pieces
+    _, p, _ = discretize(cd.load_scene("cylinder-in-groove"), "type2", 1)
     only = np.zeros(len(p), bool)
     only[::3] = True
     only[p.kind != 0] = True  # every curved piece too
@@ -270,5 +269,6 @@ def test_distance_between_non_nested_meshes_refines_straddling_pieces():
     plain = stress_distance(ref, sol, 2)["l2_rel"]
     adaptive = stress_distance(ref, sol, 2, 6)["l2_rel"]
     assert abs(adaptive - truth) < 0.5 * abs(plain - truth)
-    # and the finer of the two adaptive rules the study uses is within 0.5% of the truth
+    # and the study's check rule (3x3, 8x8 on straddlers) is within 0.5% of the truth: measured
+    # 0.1% here; the study asks its figures to be stable to 1% under a finer rule
     assert abs(stress_distance(ref, sol, 3, 8)["l2_rel"] / truth - 1) < 5e-3

@@ -9,8 +9,8 @@ For every scene, triangulation and level it solves the dual QP with the CVXPY pa
   for both types, solved by the fast path (the same discrete problem solved exactly, see
   ``cvxdual.fast``) and cached on disk; the error is integrated over the reference's pieces
   (2x2 points each, 6x6 on the pieces that straddle studied pieces; checked against 3x3 and
-  8x8) with every point located in the studied mesh. The
-  reference's own error is estimated from the levels below it: with
+  8x8) with every point located in the studied mesh. The reference's own error is estimated
+  from the levels below it: with
   ``d_k = ||lam_k - lam_(k+1)||`` and ``p = log2(d_(R-2) / d_(R-1))``, ``err_R ~ d_(R-1) / (2^p - 1)``.
 
 Finished levels are cached (``--cache``), so an interrupted run resumes; ``--quick`` runs
