@@ -16,7 +16,8 @@ from .mesh import build_mesh
 from .primal import PrimalModel
 from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
 from .scenefile import builtin_scenes, load_scene
-from .solution import Solution, build_model, recover, solve
+from .pipeline import build_model, build_system, recover, solve
+from .solution import Solution
 from .triangulation import discretize
 
 __version__ = "0.1.0"
@@ -25,6 +26,6 @@ __all__ = [
     "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",
     "MeshError", "MeshSpec", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
     "SceneError", "Solution", "SolverError", "System", "Traction", "UnbalancedLoadError",
-    "UnknownSolverError", "assemble", "build_mesh", "build_model", "builtin_scenes", "discretize", "exact_field",
+    "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize", "exact_field",
     "load_scene", "recover", "solve",
 ]

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import cvxpy as cp
 import numpy as np
-import scipy.sparse as sp
 
 from .assembly import System
 from .solvers import solve_problem
@@ -35,11 +34,11 @@ class DualModel:
         self.system = system
         sc = system.scales
         L, E0, s0 = sc.length, sc.modulus, sc.stress
-        T = system.T()
+        T = system.T
         ZT = system.Z.T.tocsr()
         H = (T.T @ (ZT @ system.E)).tocsr() / L
         h = (T.T @ (ZT @ system.f)) / (s0 * L)
-        self.J0, self.Jm = system.index_sets()
+        self.J0, self.Jm = system.index_sets
         A = (system.Ah * (E0 / L**2)).tocsr()
         c = (system.E.T @ system.q0) * (E0 / (s0 * L**2))
         n_p = system.n_pieces
@@ -74,25 +73,6 @@ class DualModel:
         y = np.zeros(s.n_r)
         y[self.J0] = self.constraints["equilibrium"].dual_value
         y[self.Jm] = self.constraints["contact"].dual_value
-        r = s.r0 - s.scales.displacement * (s.T() @ y)
+        r = s.r0 - s.scales.displacement * (s.T @ y)
         return s.Z @ r
 
-
-def admissibility(system: System, t: np.ndarray):
-    """Residual vector ``R = Z^T (E t - f)`` of stresses ``t`` ``(n_pieces, 3)``, and its scale
-    ``Z^T (|E| |t| + |f|)`` for relative measures."""
-    tv = t.ravel()
-    ZT = system.Z.T
-    R = ZT @ (system.E @ tv - system.f)
-    scale = ZT @ (abs(system.E) @ np.abs(tv) + np.abs(system.f))
-    return R, scale
-
-
-def stiffness(system: System) -> sp.csr_matrix:
-    """``K = E A_h^-1 E^T = sum_P |P| B_P^T C_P B_P`` on all dofs."""
-    k = system.local_stiffness()
-    d = system.pieces.dofs
-    rows = np.broadcast_to(d[:, :, None], k.shape).ravel()
-    cols = np.broadcast_to(d[:, None, :], k.shape).ravel()
-    n = system.n_dofs
-    return sp.coo_matrix((k.ravel(), (rows, cols)), shape=(n, n)).tocsr()

@@ -27,6 +27,7 @@ import scipy.sparse as sp
 from .assembly import System
 from .errors import SolverError
 from .factor import SPDFactor, backend
+from .sparse import assemble_blocks
 
 MAX_ITER = 60
 MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactorising
@@ -51,11 +52,7 @@ class _Base:
         self.r_e[s.jb[active]] = s.eps[active]
         rd = ps.rd
         zd = np.where(rd >= 0, self.zidx[np.maximum(rd, 0)], -1)
-        ok = (zd[:, :, None] >= 0) & (zd[:, None, :] >= 0)
-        rows = np.broadcast_to(zd[:, :, None], ps.kloc.shape)[ok]
-        cols = np.broadcast_to(zd[:, None, :], ps.kloc.shape)[ok]
-        self.K = sp.csr_matrix((ps.kloc[ok], (rows.astype(np.int32), cols.astype(np.int32))),
-                               shape=(self.n_z, self.n_z))
+        self.K = assemble_blocks(zd, zd, ps.kloc, (self.n_z, self.n_z))
         self.b_r = ps.g - ps.apply_K(self.r_e)  # r-space right-hand side with the gap moved over
         self.rhs = self.project(self.b_r)
         self.factor = SPDFactor(self.K) if factorize else None
@@ -196,32 +193,27 @@ def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.
     return np.interp(fine_x, coarse_x, coarse_active.astype(float)) >= 0.5
 
 
-def limit_matrix(system: System):
-    """The stiffness of the speed "limit": ``K`` with every contact pair closed (the bodies
-    tied, floating modes at the anchors), SPD, the same size and sparsity as the fast
-    path's matrices; and its right-hand side."""
+def limit(system: System) -> dict:
+    """The speed "limit": assemble, factorise and solve ``K`` with every contact pair closed
+    (the bodies tied, floating modes at the anchors): SPD, the same size and sparsity as the
+    fast path's matrices. Nothing solves the discrete problem faster than about this."""
+    t0 = time.perf_counter()
     base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
-    return base.K, base.rhs
-
-
-def cascade(scene, triangulation: str, level: int, pair_x: np.ndarray) -> np.ndarray | None:
-    """Warm start for ``level``: the active set of level ``level - 2`` (itself warm-started the
-    same way), transferred to the abscissae ``pair_x``; ``None`` below level 2."""
-    if level < 2:
-        return None
-    from .triangulation import discretize
-    from .assembly import assemble
-    mesh, pieces, ties = discretize(scene, triangulation, level - 2)
-    system = assemble(mesh, pieces, ties)
-    _, _, active = ActiveSet(system).solve(cascade(scene, triangulation, level - 2, mesh.pair_x))
-    return transfer_active(mesh.pair_x, active, pair_x)
+    t1 = time.perf_counter()
+    factor = SPDFactor(base.K)
+    t2 = time.perf_counter()
+    factor.solve(base.rhs)
+    t3 = time.perf_counter()
+    factor.close()
+    return {"n_dofs": int(base.K.shape[0]), "nnz": int(base.K.nnz), "t_matrix": t1 - t0, "t_factor": t2 - t1,
+            "t_solve_lin": t3 - t2, "t_limit": t3 - t1, "backend": factor.method}
 
 
 def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Displacements ``u`` (all dofs) and solver statistics."""
     t0 = time.perf_counter()
     ps = ActiveSet(system)
-    r, _, _ = ps.solve(active)
+    r, _, A = ps.solve(active)
     info = {"solver": "fast", "status": "optimal", "backend": backend(), **ps.stats,
-            "solve_time": time.perf_counter() - t0}
+            "solve_time": time.perf_counter() - t0, "active": A}
     return system.Z @ r, info

@@ -11,6 +11,7 @@ overlap in x. Used for errors against a reference on another mesh.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .mesh import Mesh
 from .pieces import Pieces, slab_bound
@@ -81,3 +82,15 @@ def _locate_body(mesh: Mesh, pieces: Pieces, k: int, toff: int, p: np.ndarray) -
                   & (y[below] <= hi + 1e-12 * scale))
             res[below[ok]] = s.piece[cand[ok]]
     return res
+
+
+def nearest_node_values(mesh: Mesh, xy: np.ndarray, body: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` of the nearest mesh node *of the same body* for points ``xy`` (the faces of
+    the two bodies share coordinates, so the body must be chosen first)."""
+    out = np.zeros((len(xy),) + values.shape[1:])
+    for k, bm in enumerate(mesh.bodies):
+        m = body == k
+        if np.any(m):
+            ids = bm.offset + np.arange(bm.n_nodes)
+            out[m] = values[ids[cKDTree(mesh.points[ids]).query(xy[m])[1]]]
+    return out

@@ -26,6 +26,7 @@ import numpy as np
 from .quadrature import gauss01, triangle_rule
 
 PIECE_KINDS = ("triangle", "segment", "concave1", "concave2")
+OUTLINE_POINTS = 12  # vertices of the polygon drawn for each curved piece
 
 
 def p1_strain(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -130,14 +131,6 @@ class Pieces:
         pts = np.stack([np.repeat(x, n), y.ravel()], axis=1)
         return pts, w.ravel(), np.repeat(s.piece[idx], n)
 
-    def integrate(self, func, n: int = 4) -> np.ndarray:
-        """``int_P func(x, y) dx`` for every piece; ``func`` maps points ``(m, 2)`` to ``(m, ...)``."""
-        pts, w, idx = self.quadrature(n)
-        vals = np.asarray(func(pts))
-        out = np.zeros((len(self),) + vals.shape[1:])
-        np.add.at(out, idx, w.reshape((-1,) + (1,) * (vals.ndim - 1)) * vals)
-        return out
-
 
 def slab_bound(slabs: Slabs, faces, x, idx, which: str) -> np.ndarray:
     """The ``lo`` or ``hi`` bound of slabs ``idx`` at abscissae ``x`` (same shape)."""
@@ -226,3 +219,28 @@ def build_pieces(points, tris, tri_body, faces, keep=None, curved=None) -> Piece
     return Pieces(kind=np.concatenate(kinds), body=np.concatenate(bodies), nodes=np.concatenate(nodes),
                   B=np.concatenate(Bs), area=np.concatenate(areas), phi=np.concatenate(phis),
                   tri_vertices=xy, tri_piece=np.arange(n_s), slabs=slabs, faces=tuple(faces), tri_map=tri_map)
+
+
+def piece_outlines(pieces: Pieces, n: int = OUTLINE_POINTS) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Outlines of the curved pieces, following the face: ``[(piece ids (m,), polygons (m, v, 2))]``,
+    one entry per number of slabs (pieces of one entry have the same number of vertices)."""
+    s = pieces.slabs
+    if not len(s):
+        return []
+    order = np.lexsort((s.xl, s.piece))
+    counts = np.bincount(s.piece)
+    k = max(2, n // 2)
+    t = np.linspace(0.0, 1.0, k)
+    out = []
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])  # first slab (in `order`) of each piece
+    for c in np.unique(counts[counts > 0]):
+        ids = np.flatnonzero(counts == c)
+        sl = order[start[ids][:, None] + np.arange(c)[None, :]]  # (m, c) slabs left to right
+        x = s.xl[sl][..., None] + t * (s.xr - s.xl)[sl][..., None]  # (m, c, k)
+        idx = np.broadcast_to(sl[..., None], x.shape)
+        lo = slab_bound(s, pieces.faces, x, idx, "lo").reshape(len(ids), -1)
+        hi = slab_bound(s, pieces.faces, x, idx, "hi").reshape(len(ids), -1)
+        xf = x.reshape(len(ids), -1)
+        poly = np.concatenate([np.stack([xf, lo], -1), np.stack([xf, hi], -1)[:, ::-1]], axis=1)
+        out.append((ids, poly))
+    return out

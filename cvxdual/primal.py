@@ -12,7 +12,6 @@ import cvxpy as cp
 import numpy as np
 
 from .assembly import System
-from .dual import stiffness
 from .solvers import solve_problem
 
 
@@ -22,7 +21,7 @@ class PrimalModel:
         sc = system.scales
         delta = sc.displacement
         Z = system.Z
-        K = (Z.T @ stiffness(system) @ Z).tocsr() / sc.modulus
+        K = (Z.T @ system.stiffness() @ Z).tocsr() / sc.modulus
         g = (Z.T @ system.f) / (sc.stress * sc.length)
         self.r = cp.Variable(system.n_r, name="r")
         cons = {"contact": self.r[system.jb] - self.r[system.ja] <= system.eps / delta}

@@ -1,28 +1,23 @@
-"""Solving a scene end to end, and the :class:`Solution` it returns.
+"""The :class:`Solution` of a scene and the checks every solution passes
+(docs/theory.md#recovery-and-checks).
 
-``solve(scene)`` meshes, assembles, builds the CVXPY dual, solves it, recovers displacements
-from the multipliers and checks the result: equilibrium and sign of contact forces, the
-constitutive law ``t_P = C_P B_P u_h``, complementarity and the discrete duality gap.
-A result that fails the promised tolerances (:data:`TOLERANCES`) raises
+From the stresses ``t`` and the recovered displacements ``u_h``: equilibrium and sign of the
+contact forces, the constitutive law ``t_P = C_P B_P u_h``, complementarity and the discrete
+duality gap. A result that fails the promised tolerances (:data:`TOLERANCES`) raises
 :class:`~cvxdual.errors.AccuracyError`; it is never returned.
 """
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import System, assemble
-from .dual import DualModel, admissibility
-from .errors import AccuracyError, SceneError
+from .assembly import System
+from .errors import AccuracyError
 from .exact import exact_field
 from .norms import VOIGT_WEIGHT, stress_error
 from .scene import Scene
-from .solvers import FAST, resolve_solver
-from .triangulation import check_triangulation, discretize
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
@@ -39,25 +34,27 @@ def load_scale(system: System) -> float:
     return float(np.abs(system.f).sum()) or system.scales.stress * system.scales.length
 
 
-@dataclass
+@dataclass(frozen=True)
 class Solution:
-    """A solved scene. Arrays: ``stress`` ``(n_pieces, 3)``, ``displacement`` ``(n_nodes, 2)``,
-    contact arrays ``(n_pairs,)`` ordered by ``x``."""
+    """A solved scene, built complete by :func:`cvxdual.solve` and never changed afterwards.
+    Arrays: ``stress`` ``(n_pieces, 3)``, ``displacement`` ``(n_nodes, 2)``, contact arrays
+    ``(n_pairs,)`` ordered by ``x``; ``timings`` in seconds per phase."""
 
     scene: Scene
     triangulation: str
+    stress_space: str
     level: int
     system: System
     stress: np.ndarray
     displacement: np.ndarray
     solver: dict
     timings: dict
-    objective: float = 0.0
-    duality_gap: float = 0.0
-    residuals: dict = field(default_factory=dict)
-    contact: dict = field(default_factory=dict)
-    exact: dict | None = None
-    error: dict | None = None
+    objective: float
+    duality_gap: float
+    residuals: dict
+    contact: dict
+    exact: dict | None
+    error: dict | None
 
     @property
     def mesh(self):
@@ -74,6 +71,7 @@ class Solution:
         return {
             "scene": self.scene.name,
             "triangulation": self.triangulation,
+            "stress_space": self.stress_space,
             "level": self.level,
             "units": {"length": self.scene.units[0], "stress": self.scene.units[1]},
             "n_pieces": s.n_pieces,
@@ -96,6 +94,16 @@ class Solution:
             "error": self.error,
             "timings": dict(self.timings),
         }
+
+
+def admissibility(system: System, t: np.ndarray):
+    """Residual vector ``R = Z^T (E t - f)`` of stresses ``t`` ``(n_pieces, 3)``, and its scale
+    ``Z^T (|E| |t| + |f|)`` for relative measures."""
+    tv = t.ravel()
+    ZT = system.Z.T
+    R = ZT @ (system.E @ tv - system.f)
+    scale = ZT @ (abs(system.E) @ np.abs(tv) + np.abs(system.f))
+    return R, scale
 
 
 def contact_quantities(system: System, R: np.ndarray, u: np.ndarray) -> dict:
@@ -140,7 +148,7 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=N
     """
     R, scale = admissibility(system, t) if adm is None else adm
     f_ref = load_scale(system)
-    Ry = system.T().T @ R
+    Ry = system.T.T @ R
     viol = np.abs(Ry)
     viol[system.jb] = np.maximum(Ry[system.jb], 0.0)
     eq = float(viol.max() / max(scale.max(), 1e-6 * f_ref)) if len(viol) else 0.0
@@ -177,88 +185,18 @@ def duality_gap(system: System, t: np.ndarray, u: np.ndarray) -> float:
     return abs(val) / max(energy, abs(objective), 1e-12 * sc.stress**2 * sc.length**2 / sc.modulus)
 
 
-def build_model(scene: Scene, triangulation: str = "type1", level: int | None = None) -> DualModel:
-    """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it."""
-    mesh, pieces, ties = discretize(scene, check_triangulation(triangulation), level)
-    return DualModel(assemble(mesh, pieces, ties))
-
-
-def solve(scene: Scene, triangulation: str = "type1", level: int | None = None,
-          solver: str | None = None, check: bool = True, warm_start: bool = True,
-          **solver_options) -> Solution:
-    """Solve the discrete dual problem of ``scene``; see the module docstring.
-
-    ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
-    :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
-    """
-    if not isinstance(scene, Scene):
-        from .scenefile import load_scene
-        if not isinstance(scene, (str, Path, dict)):
-            raise SceneError(f"solve() needs a Scene, a built-in scene name or a .toml path, got {type(scene).__name__}")
-        scene = load_scene(scene)
-    solver = resolve_solver(solver)
-    triangulation = check_triangulation(triangulation)
-    level = scene.mesh.default_level if level is None else level
-    t0 = time.perf_counter()
-    mesh, pieces, ties = discretize(scene, triangulation, level)
-    t1 = time.perf_counter()
-    system = assemble(mesh, pieces, ties)
-    t2 = time.perf_counter()
-    if not np.any(system.f) and np.all(system.eps >= 0):
-        # nothing acts (no load, no interference): lam = 0 is admissible and S(lam) >= S(0) for
-        # every admissible lam (contact forces are compressive, gaps >= 0), so it is the solution
-        t3 = t4 = time.perf_counter()
-        zero = np.zeros(system.n_dofs)
-        info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
-        sol = make_solution(system, np.zeros((system.n_pieces, 3)), zero, triangulation, level, info, check)
-        build, solve_time = 0.0, 0.0
-    elif solver == FAST:
-        from .fast import cascade, solve_fast
-        active = cascade(scene, triangulation, level, mesh.pair_x) if warm_start else None
-        t3 = time.perf_counter()
-        u, info = solve_fast(system, active)
-        info["warm_start_time"] = t3 - t2  # counted in "solve": it is part of the fast path's work
-        t4 = time.perf_counter()
-        sol = make_solution(system, system.stresses_from_displacement(u), u, triangulation, level, info, check)
-        build, solve_time = 0.0, t4 - t2
-    else:
-        model = DualModel(system)
-        t3 = time.perf_counter()
-        info = model.solve(solver, **solver_options)
-        t4 = time.perf_counter()
-        sol = recover(model, triangulation, level, info, check)
-        # CVXPY canonicalises inside solve(); count that as building the problem
-        compile_time = float(info.get("compile_time") or 0.0)
-        build, solve_time = t3 - t2 + compile_time, t4 - t3 - compile_time
-    t5 = time.perf_counter()
-    sol.timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": solve_time,
-                   "recover": t5 - t4, "total": t5 - t0}
-    return sol
-
-
-def recover(model: DualModel, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
-    """The :class:`Solution` of a solved CVXPY model: stresses, and displacements from the multipliers."""
-    return make_solution(model.system, model.stresses(), model.displacements(), triangulation, level, info,
-                         check and not model.extra)
-
-
-def make_solution(system: System, t: np.ndarray, u: np.ndarray, triangulation: str, level: int, info: dict,
-                  check: bool = True) -> Solution:
-    """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and displacements ``u``."""
+def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict) -> dict:
+    """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
+    displacements ``u``: every field of a :class:`Solution` that the solve itself does not give."""
     scene = system.mesh.scene
     adm = admissibility(system, t)
     contact = contact_quantities(system, adm[0], u)
     res = residuals(system, t, u, contact, adm)
-    objective = dual_objective(system, t)
     exact = exact_field(scene)
-    error = stress_error(system, t, exact.stress) if exact is not None else None
-    sol = Solution(scene=scene, triangulation=triangulation, level=level, system=system, stress=t,
-                   displacement=u.reshape(-1, 2), solver=info, timings={}, objective=objective,
-                   duality_gap=res["duality_gap"], residuals=res, contact=contact,
-                   exact=exact.data() if exact is not None else None, error=error)
-    if check:
-        check_solution(sol)
-    return sol
+    return {"scene": scene, "system": system, "stress": t, "displacement": u.reshape(-1, 2), "solver": info,
+            "objective": dual_objective(system, t), "duality_gap": res["duality_gap"], "residuals": res,
+            "contact": contact, "exact": exact.data() if exact is not None else None,
+            "error": stress_error(system, t, exact.stress) if exact is not None else None}
 
 
 def check_solution(sol: Solution) -> None:

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.assembly import assemble, side_quadrature
+from cvxdual.assembly import assemble
+from cvxdual.boundary import side_quadrature
 from cvxdual.locate import locate
 from cvxdual.scene import BoundaryPart, Traction
 from cvxdual.triangulation import discretize, stretches

@@ -1,0 +1,130 @@
+"""The one way from a scene to a solution: scene -> mesh and pieces -> assembly -> model ->
+solution (docs/theory.md).
+
+``solve(scene)`` meshes, assembles, builds and solves the dual (the CVXPY path) or its
+displacement form (the fast path), recovers displacements and checks the result. Warm starts
+of the fast path are arranged here: the active set of level ``L - 2``, solved by this same
+pipeline, transferred to level ``L``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .assembly import System, assemble
+from .errors import CvxdualError, SceneError
+from .scene import Scene
+from .solution import Solution, check_solution, evaluate
+from .solvers import FAST, resolve_solver
+from .triangulation import check_triangulation, discretize
+
+STRESS_SPACES = ("p0",)  # the paper's piecewise-constant stresses on the pieces
+
+
+def check_stress_space(name) -> str:
+    name = str(name).lower()
+    if name not in STRESS_SPACES:
+        raise CvxdualError(f"unknown stress space {name!r}; choose one of {', '.join(STRESS_SPACES)}")
+    return name
+
+
+def as_scene(scene) -> Scene:
+    """A :class:`Scene`, or a built-in scene name, a .toml path or a scene dict loaded as one."""
+    if isinstance(scene, Scene):
+        return scene
+    if not isinstance(scene, (str, Path, dict)):
+        raise SceneError(f"expected a Scene, a built-in scene name or a .toml path, got {type(scene).__name__}")
+    from .scenefile import load_scene
+    return load_scene(scene)
+
+
+def build_system(scene, triangulation: str = "type1", level: int | None = None) -> System:
+    """Mesh and assemble ``scene``: the :class:`~cvxdual.assembly.System` of the discrete problem."""
+    scene = as_scene(scene)
+    return assemble(*discretize(scene, check_triangulation(triangulation), level))
+
+
+def build_model(scene, triangulation: str = "type1", level: int | None = None):
+    """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it."""
+    from .dual import DualModel
+    return DualModel(build_system(scene, triangulation, level))
+
+
+def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
+          check: bool = True, warm_start: bool = True, stress_space: str = "p0", **solver_options) -> Solution:
+    """Solve the discrete dual problem of ``scene``; see the module docstring.
+
+    ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
+    :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
+    ``check`` false returns solutions that fail the accuracy checks (for studies of them).
+    """
+    scene = as_scene(scene)
+    solver = resolve_solver(solver)
+    triangulation = check_triangulation(triangulation)
+    stress_space = check_stress_space(stress_space)
+    level = scene.mesh.default_level if level is None else level
+    t0 = time.perf_counter()
+    mesh, pieces, ties = discretize(scene, triangulation, level)
+    t1 = time.perf_counter()
+    system = assemble(mesh, pieces, ties)
+    t2 = time.perf_counter()
+    build = 0.0
+    if not np.any(system.f) and np.all(system.eps >= 0):
+        # nothing acts (no load, no interference): lam = 0 is admissible and S(lam) >= S(0) for
+        # every admissible lam (contact forces are compressive, gaps >= 0), so it is the solution
+        u = np.zeros(system.n_dofs)
+        t = np.zeros((system.n_pieces, 3))
+        info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
+    elif solver == FAST:
+        from .fast import solve_fast
+        active = warm_start_active(scene, triangulation, level, mesh.pair_x) if warm_start else None
+        t_warm = time.perf_counter() - t2
+        u, info = solve_fast(system, active)
+        info["warm_start_time"] = t_warm  # counted in "solve": it is part of the fast path's work
+        t = system.stresses_from_displacement(u)
+    else:
+        from .dual import DualModel
+        model = DualModel(system)
+        t_built = time.perf_counter()
+        info = model.solve(solver, **solver_options)
+        # CVXPY canonicalises inside solve(); count that as building the problem
+        build = t_built - t2 + float(info.get("compile_time") or 0.0)
+        t, u = model.stresses(), model.displacements()
+    t4 = time.perf_counter()
+    fields = evaluate(system, t, u, info)
+    t5 = time.perf_counter()
+    timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
+               "recover": t5 - t4, "total": t5 - t0}
+    sol = Solution(triangulation=triangulation, stress_space=stress_space, level=int(level), timings=timings,
+                   **fields)
+    if check:
+        check_solution(sol)
+    return sol
+
+
+def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.ndarray) -> np.ndarray | None:
+    """Initial active set for ``level``: the one of level ``level - 2`` (itself warm-started the
+    same way), transferred to the abscissae ``pair_x``; ``None`` below level 2."""
+    if level < 2:
+        return None
+    from .fast import solve_fast, transfer_active
+    system = build_system(scene, triangulation, level - 2)
+    if not np.any(system.f) and np.all(system.eps >= 0):
+        return None
+    coarse_x = system.mesh.pair_x
+    u, info = solve_fast(system, warm_start_active(scene, triangulation, level - 2, coarse_x))
+    return transfer_active(coarse_x, info["active"], pair_x)
+
+
+def recover(model, triangulation: str, level: int, info: dict, check: bool = True,
+            stress_space: str = "p0") -> Solution:
+    """The :class:`Solution` of a CVXPY model solved by the caller (``info`` from its ``solve``);
+    the accuracy checks apply only if the user added no constraint."""
+    fields = evaluate(model.system, model.stresses(), model.displacements(), info)
+    sol = Solution(triangulation=triangulation, stress_space=stress_space, level=int(level), timings={}, **fields)
+    if check and not model.extra:
+        check_solution(sol)
+    return sol
