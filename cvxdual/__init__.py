@@ -8,15 +8,24 @@ Names from the paper are used where they help a reader holding it: ``lam`` (stre
 
 from .assembly import System, assemble
 from .dual import DualModel
-from .errors import (AccuracyError, CvxdualError, MeshError, NoAdmissibleStressError, OutputError,
-                     SceneError, SolverError, UnbalancedLoadError, UnknownSolverError)
+from .errors import (
+                     AccuracyError,
+                     CvxdualError,
+                     MeshError,
+                     NoAdmissibleStressError,
+                     OutputError,
+                     SceneError,
+                     SolverError,
+                     UnbalancedLoadError,
+                     UnknownSolverError,
+)
 from .exact import exact_field
 from .materials import Material
 from .mesh import build_mesh
+from .pipeline import build_model, build_system, recover, solve
 from .primal import PrimalModel
 from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
 from .scenefile import builtin_scenes, load_scene
-from .pipeline import build_model, build_system, recover, solve
 from .solution import Solution
 from .triangulation import discretize
 
@@ -26,6 +35,6 @@ __all__ = [
     "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",
     "MeshError", "MeshSpec", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
     "SceneError", "Solution", "SolverError", "System", "Traction", "UnbalancedLoadError",
-    "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize", "exact_field",
-    "load_scene", "recover", "solve",
+    "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize",
+    "exact_field",    "load_scene", "recover", "solve",
 ]

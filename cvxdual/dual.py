@@ -1,4 +1,4 @@
-"""The discrete dual problem as a CVXPY model (MATH.md section 3).
+"""The discrete dual problem as a CVXPY model (docs/theory.md#discretisation).
 
 One stress Variable ``t`` for all pieces; the admissibility ``<lam_h, e(v_h)> >= L(v_h)``
 for all ``v_h`` in the cone ``K0h`` is written through the cone's generators (the paper's
@@ -68,7 +68,8 @@ class DualModel:
         return self.system.scales.stress * np.asarray(self.t.value).reshape(-1, 3)
 
     def displacements(self) -> np.ndarray:
-        """Nodal displacements ``u_h = Z (r0 - T y*)`` from the multipliers ``y*`` (MATH.md section 3)."""
+        """Nodal displacements ``u_h = Z (r0 - T y*)`` from the multipliers ``y*``
+        (docs/theory.md#recovery-and-checks)."""
         s = self.system
         y = np.zeros(s.n_r)
         y[self.J0] = self.constraints["equilibrium"].dual_value

@@ -1,6 +1,6 @@
-"""The fast path: the same discrete problem in its condensed displacement form (MATH.md
-section 3), solved by a primal-dual active set method (semismooth Newton, Hintermueller,
-Ito and Kunisch 2002) with sparse SPD factorisations.
+"""The fast path: the same discrete problem in its condensed displacement form
+(docs/theory.md#the-displacement-form-and-the-fast-path), solved by a primal-dual active set
+method (semismooth Newton, Hintermueller, Ito and Kunisch 2002) with sparse SPD factorisations.
 
 ``min 1/2 r.K r - g.r`` subject to ``r''_y(B_k) - r'_y(A_k) <= eps_k``, with
 ``K = Z^T E A_h^-1 E^T Z``: for type 1 this is exactly the Lagrangian dual of the stress QP, so
@@ -53,7 +53,7 @@ class _Base:
         rd = ps.rd
         zd = np.where(rd >= 0, self.zidx[np.maximum(rd, 0)], -1)
         self.K = assemble_blocks(zd, zd, ps.kloc, (self.n_z, self.n_z))
-        self.b_r = ps.g - ps.apply_K(self.r_e)  # r-space right-hand side with the gap moved over
+        self.b_r = ps.g - ps.apply_k(self.r_e)  # r-space right-hand side with the gap moved over
         self.rhs = self.project(self.b_r)
         self.factor = SPDFactor(self.K) if factorize else None
 
@@ -80,11 +80,11 @@ class ActiveSet:
         self.anchored[s.anchors] = True
         self.stats = {"iterations": 0, "factorizations": 0, "schur_updates": 0, "max_update": 0}
 
-    def apply_K(self, r: np.ndarray) -> np.ndarray:
+    def apply_k(self, r: np.ndarray) -> np.ndarray:
         s = self.system
         return s.Z.T @ (s.E @ s.stresses_from_displacement(s.Z @ r).ravel())
 
-    def K_columns(self, j: np.ndarray) -> sp.csc_matrix:
+    def k_columns(self, j: np.ndarray) -> sp.csc_matrix:
         """``K e_j`` for r indices ``j``: ``(n_r, len(j))``, from the pieces around them."""
         pos = np.full(self.system.n_r, -1)
         pos[j] = np.arange(len(j))
@@ -100,7 +100,7 @@ class ActiveSet:
         if not len(rel) and not len(add):
             return base.expand(base.factor.solve(base.rhs))
         jb_rel = s.jb[rel]
-        Kc = self.K_columns(jb_rel)
+        Kc = self.k_columns(jb_rel)
         U = base.project(Kc.toarray())
         Kbb = Kc[jb_rel, :].toarray()
         W = np.zeros((base.n_z, len(add)))
@@ -169,7 +169,7 @@ class ActiveSet:
                 self.stats["factorizations"] += 1
                 rel = add = np.empty(0, int)
             r = self._solve(base, rel, add)
-            force = (self.g - self.apply_K(r))[s.jb]
+            force = (self.g - self.apply_k(r))[s.jb]
             force[~A] = 0.0
             opening = s.eps - (r[s.jb] - r[s.ja])
             # rounding-level forces and penetrations do not change the set (avoids cycling

@@ -1,4 +1,4 @@
-"""Hertz line contact and the McEwen subsurface stress field (MATH.md section 5).
+"""Hertz line contact and the McEwen subsurface stress field (docs/theory.md#errors-norms-and-benchmarks).
 
 ``hertz_line_contact`` gives the half-width ``a`` and peak pressure ``p0``; ``mcewen_stress``
 is the exact plane stress field of an elastic half-space under the Hertz pressure, in the
@@ -6,7 +6,7 @@ local frame ``(x, z)`` with ``z >= 0`` the depth into the body; ``body_stress`` 
 the global ``(x, y)`` frame of the upper or lower body as Voigt ``(s11, s22, s12)``.
 
 Sign conventions: tension positive, the pressure ``p(x) >= 0`` pushes into each body.
-The McEwen formulas of MATH.md were checked here (equilibrium residual, surface values,
+The McEwen formulas were checked here (equilibrium residual, surface values,
 max shear ``0.300 p0`` at ``z = 0.786 a``) and are used as written, with ``n`` of the sign
 of ``x``. Shear-sign mapping, derived in ``body_stress``: upper body ``s12 = +t_xz``,
 lower body ``s12 = -t_xz``.

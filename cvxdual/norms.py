@@ -1,4 +1,4 @@
-"""Stress norms and errors (MATH.md section 5).
+"""Stress norms and errors (docs/theory.md#errors-norms-and-benchmarks).
 
 ``||lam||_0^2 = int lam:lam dx`` (with ``lam:lam = s11^2 + s22^2 + 2 s12^2``) and the energy
 norm ``(A lam, lam)^(1/2)``, integrated piece by piece (curved pieces included) with a

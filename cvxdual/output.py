@@ -93,7 +93,7 @@ def figures(sol) -> dict:
     pts = sol.mesh.points
     aspect = min(max(np.ptp(pts[:, 1]) / np.ptp(pts[:, 0]), 0.3), 2.5)
     stress = Figure(figsize=(12.0, 1.0 + 6.0 * aspect * 0.85), layout="constrained")
-    for ax, comp in zip(stress.subplots(1, 2), ("s22", "shear")):
+    for ax, comp in zip(stress.subplots(1, 2), ("s22", "shear"), strict=True):
         plot_stress(sol, comp, ax=ax)
     stress.suptitle(f"{sol.scene.name}, {sol.triangulation}, level {sol.level}: {sol.system.n_pieces} pieces")
     deformed = Figure(figsize=(6.0, 1.0 + 6.0 * aspect * 0.85), layout="constrained")
@@ -134,4 +134,4 @@ def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
 
 
 # TEMPORARY re-exports for the study modules being rewritten (removed when they import cvxdual.files)
-from .files import atomic_path, write_json as atomic_write_json, write_text as atomic_write_text  # noqa: E402,F401
+from .files import atomic_path  # noqa: E402,F401

@@ -110,11 +110,11 @@ class Pieces:
         J = 2.0 * np.abs(p1_strain(v)[1])  # |det| of the affine map
         pts = (v[:, None, 0, :] + rs[None, :, 0, None] * (v[:, None, 1, :] - v[:, None, 0, :])
                + rs[None, :, 1, None] * (v[:, None, 2, :] - v[:, None, 0, :]))
-        P, W, I = [pts.reshape(-1, 2)], [(J[:, None] * w[None, :]).ravel()], [np.repeat(self.tri_piece[tri], len(w))]
+        P, W, ids = [pts.reshape(-1, 2)], [(J[:, None] * w[None, :]).ravel()], [np.repeat(self.tri_piece[tri], len(w))]
         if len(self.slabs):
             sp, sw, si = self._slab_rule(n, only)
-            P.append(sp), W.append(sw), I.append(si)
-        return np.concatenate(P), np.concatenate(W), np.concatenate(I)
+            P.append(sp), W.append(sw), ids.append(si)
+        return np.concatenate(P), np.concatenate(W), np.concatenate(ids)
 
     def _slab_rule(self, n: int, only: np.ndarray | None = None):
         s = self.slabs

@@ -1,4 +1,4 @@
-"""The primal cross-check: the displacement QP on the same ``V_h`` (MATH.md section 3).
+"""The primal cross-check: the displacement QP on the same ``V_h`` (docs/theory.md#discretisation).
 
 ``min 1/2 r.K_r r - g.r`` over ``r`` with ``r''_y(B_k) - r'_y(A_k) <= eps_k``, where
 ``K_r = Z^T K Z``, ``K = E A_h^-1 E^T``, ``g = Z^T f``; floating rigid motions are fixed at the

@@ -62,9 +62,6 @@ class Profile:
         """Interval of ``x`` on which the curve is defined as a graph."""
         return (-np.inf, np.inf)
 
-    def params(self) -> dict:
-        return {"kind": self.kind, **{f.name: getattr(self, f.name) for f in fields(self)}}
-
     def is_flat(self) -> bool:
         return False
 
@@ -156,9 +153,6 @@ class Circle(Profile):
 
     def domain(self) -> tuple[float, float]:
         return (self.xc - self.R, self.xc + self.R)
-
-    def params(self) -> dict:
-        return {**super().params(), "branch": self.branch}
 
 
 @dataclass(frozen=True)

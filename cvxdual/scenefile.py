@@ -119,7 +119,8 @@ def _check_keys(d, allowed: set[str] | None, where: str) -> dict:
         return d
     unknown = sorted(set(d) - allowed)
     if unknown:
-        raise SceneError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(allowed))}")
+        raise SceneError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; "
+                         f"allowed: {', '.join(sorted(allowed))}")
     return d
 
 

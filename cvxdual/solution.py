@@ -170,13 +170,14 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=N
 
 
 def dual_objective(system: System, t: np.ndarray) -> float:
-    """``S(t) = 1/2 t.A_h t - t.E^T q0`` (MATH.md section 3)."""
+    """``S(t) = 1/2 t.A_h t - t.E^T q0`` (docs/theory.md#discretisation)."""
     tv = t.ravel()
     return 0.5 * float(tv @ (system.Ah @ tv)) - float(tv @ (system.E.T @ system.q0))
 
 
 def duality_gap(system: System, t: np.ndarray, u: np.ndarray) -> float:
-    """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy (MATH.md section 2)."""
+    """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy
+    (docs/theory.md#primal-and-dual-problems)."""
     tv = t.ravel()
     energy = 0.5 * float(tv @ (system.Ah @ tv))
     objective = energy - float(tv @ (system.E.T @ system.q0))

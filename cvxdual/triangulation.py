@@ -1,4 +1,4 @@
-"""The two triangulations of the paper (MATH.md section 4) on column meshes.
+"""The two triangulations of the paper (docs/theory.md#the-two-triangulations) on column meshes.
 
 A face stretch is *convex* for its body where the body lies on the convex side of the arc
 (``sign * f'' > 0``: upper body above a convex ``f'``, lower body below a concave ``f''``),
@@ -60,7 +60,7 @@ def stretches(scene: Scene, body: Body) -> list[tuple[float, float, str]]:
     """``(x_start, x_end, kind)`` with kind ``flat``, ``convex`` or ``concave`` for the body."""
     b = break_points(scene, body)
     out = []
-    for lo, hi in zip(b[:-1], b[1:]):
+    for lo, hi in zip(b[:-1], b[1:], strict=True):
         if body.face.is_flat():
             kind = "flat"
         else:
@@ -182,69 +182,85 @@ def _bounds(upper: bool, line_at):
     return {"lo": line_at, "lo_arc": ~arc, "hi": np.zeros((n, 2)), "hi_arc": arc}
 
 
+def _segments(cur: _Curved, k: int, lay: dict, sel: np.ndarray) -> None:
+    """Convex stretches: the segment between chord and arc of each layer-0 triangle ``A, B, C``."""
+    A, B, C, c = lay["A"], lay["B"], lay["C"], lay["c"]
+    chord = np.stack([lay["pts"][A, 1], lay["pts"][B, 1]], 1)
+    cur.add("segment", k, np.stack([A, B, C], 1)[sel], -1,
+            [{"xl": c[sel], "xr": c[sel + 1], **_bounds(lay["upper"], chord[sel]),
+              "edge": np.array([0, 1]), "edge_x": lay["ex"][sel]}])
+
+
+def _concave1(cur: _Curved, k: int, lay: dict, sel: np.ndarray, face) -> np.ndarray:
+    """Type 1 on concave stretches: the layer-0 triangle becomes the curved ``T_c`` (``v_h``
+    constant along y); returns the ties ``(C, B)`` that continuity imposes."""
+    A, B, C, c, pts = lay["A"], lay["B"], lay["C"], lay["c"], lay["pts"]
+    line = np.stack([pts[A[sel], 1], pts[C[sel], 1]], 1)  # the side A-C of the triangle
+    _check_inside(face, c[sel], c[sel + 1], line, lay["upper"])
+    cur.add("concave1", k, np.stack([A, B, C], 1)[sel], lay["t1"][sel],
+            [{"xl": c[sel], "xr": c[sel + 1], **_bounds(lay["upper"], line),
+              "edge": np.array([0, 1]), "edge_x": lay["ex"][sel]}])
+    return np.stack([C[sel], B[sel]], 1)
+
+
+def _concave2(cur: _Curved, k: int, bm, pts: np.ndarray, polygon) -> None:
+    """Type 2: the pieces ``T_c`` of ``D_h`` between a tangent polygon and the arc, each cut by
+    the vertical through its vertex ``A_i`` into two slabs under the polygon edges at ``A_i``."""
+    s, xa, _ = polygon
+    c = bm.columns
+    xs = np.concatenate([[s[0]], xa, [s[-1]]])  # face nodes P_0 .. P_{m+1}: s_0, the vertices, s_m
+    col = np.searchsorted(c, xs)
+    if np.any(c[col] != xs):
+        raise MeshError("internal: tangent polygon vertices are not columns")  # pragma: no cover
+    P = bm.node(col, 0)
+    Px, Py = pts[P, 0], pts[P, 1]
+    j = np.arange(len(xa))
+    upper = bm.body.position == "upper"
+
+    def line(a, b, x0, x1):
+        slope = (Py[b] - Py[a]) / (Px[b] - Px[a])
+        return np.stack([Py[a] + slope * (x0 - Px[a]), Py[a] + slope * (x1 - Px[a])], 1)
+
+    left = {"xl": s[j], "xr": xa, **_bounds(upper, line(j, j + 1, s[j], xa)),
+            "edge": np.array([0, 1]), "edge_x": np.stack([Px[j], Px[j + 1]], 1)}
+    right = {"xl": xa, "xr": s[j + 1], **_bounds(upper, line(j + 1, j + 2, xa, s[j + 1])),
+             "edge": np.array([1, 2]), "edge_x": np.stack([Px[j + 1], Px[j + 2]], 1)}
+    cur.add("concave2", k, np.stack([P[j], P[j + 1], P[j + 2]], 1), -1, [left, right])
+
+
 def _pieces(mesh: Mesh, tri: str, polygons) -> tuple[Pieces, np.ndarray | None]:
-    scene = mesh.scene
+    """Straight triangles, and the curved pieces of every face stretch by its kind."""
     tris = mesh.triangles()
     keep = np.ones(len(tris), bool)
     cur = _Curved()
     ties = []
-    pts = mesh.points
     toff = 0
     for k, bm in enumerate(mesh.bodies):
-        body = bm.body
-        face = body.face
+        face = bm.body.face
         c = bm.columns
         nc, nl = bm.shape
-        upper = body.position == "upper"
         i = np.arange(nc - 1)
         mid = 0.5 * (c[:-1] + c[1:])
-        kappa = body.sign * face.curvature(mid) if not face.is_flat() else np.zeros(len(mid))
+        kappa = bm.body.sign * face.curvature(mid) if not face.is_flat() else np.zeros(len(mid))
         in_poly = np.zeros(len(mid), bool)
         for s, _, _ in polygons[k]:
             in_poly |= (mid > s[0]) & (mid < s[-1])
-        A, B, C = bm.node(i, 0), bm.node(i + 1, 0), bm.node(i + 1, 1)
-        t1 = toff + i * (nl - 1)  # mesh index of the layer-0 triangle (i,0), (i+1,0), (i+1,1)
-        chord = np.stack([pts[A, 1], pts[B, 1]], 1)
-        ex = np.stack([c[:-1], c[1:]], 1)
-        edge01 = np.array([0, 1])
-        cv = np.flatnonzero((kappa > 0) & ~in_poly)
-        if len(cv):
-            cur.add("segment", k, np.stack([A, B, C], 1)[cv], -1,
-                    [{"xl": c[cv], "xr": c[cv + 1], **_bounds(upper, chord[cv]),
-                      "edge": edge01, "edge_x": ex[cv]}])
-        cc = np.flatnonzero((kappa < 0) & ~in_poly)
-        if len(cc):
+        # the layer-0 triangle (i,0), (i+1,0), (i+1,1) of each column: two face nodes, a vertical side
+        lay = {"A": bm.node(i, 0), "B": bm.node(i + 1, 0), "C": bm.node(i + 1, 1), "c": c, "pts": mesh.points,
+               "upper": bm.body.position == "upper", "t1": toff + i * (nl - 1), "ex": np.stack([c[:-1], c[1:]], 1)}
+        convex = np.flatnonzero((kappa > 0) & ~in_poly)
+        if len(convex):
+            _segments(cur, k, lay, convex)
+        concave = np.flatnonzero((kappa < 0) & ~in_poly)
+        if len(concave):
             if tri == "type2":
                 raise MeshError("internal: a concave stretch without tangent polygon")  # pragma: no cover
-            line = np.stack([pts[A[cc], 1], pts[C[cc], 1]], 1)  # the side A-C of the triangle
-            _check_inside(face, c[cc], c[cc + 1], line, upper)
-            cur.add("concave1", k, np.stack([A, B, C], 1)[cc], t1[cc],
-                    [{"xl": c[cc], "xr": c[cc + 1], **_bounds(upper, line),
-                      "edge": edge01, "edge_x": ex[cc]}])
-            keep[t1[cc]] = False
-            ties.append(np.stack([C[cc], B[cc]], 1))
-        for s, xa, ya in polygons[k]:
-            # face nodes P_0 .. P_{m+1} at s_0, the vertices, s_m
-            xs = np.concatenate([[s[0]], xa, [s[-1]]])
-            col = np.searchsorted(c, xs)
-            if np.any(c[col] != xs):
-                raise MeshError("internal: tangent polygon vertices are not columns")  # pragma: no cover
-            P = bm.node(col, 0)
-            Px, Py = pts[P, 0], pts[P, 1]
-            m = len(xa)
-            j = np.arange(m)
-
-            def line(a, b, x0, x1):
-                slope = (Py[b] - Py[a]) / (Px[b] - Px[a])
-                return np.stack([Py[a] + slope * (x0 - Px[a]), Py[a] + slope * (x1 - Px[a])], 1)
-
-            left = {"xl": s[j], "xr": xa, **_bounds(upper, line(j, j + 1, s[j], xa)),
-                    "edge": edge01, "edge_x": np.stack([Px[j], Px[j + 1]], 1)}
-            right = {"xl": xa, "xr": s[j + 1], **_bounds(upper, line(j + 1, j + 2, xa, s[j + 1])),
-                     "edge": np.array([1, 2]), "edge_x": np.stack([Px[j + 1], Px[j + 2]], 1)}
-            cur.add("concave2", k, np.stack([P[j], P[j + 1], P[j + 2]], 1), -1, [left, right])
+            ties.append(_concave1(cur, k, lay, concave, face))
+            keep[lay["t1"][concave]] = False
+        for polygon in polygons[k]:
+            _concave2(cur, k, bm, mesh.points, polygon)
         toff += len(bm.triangles())
-    pieces = build_pieces(mesh.points, tris, mesh.triangle_body(), [b.face for b in scene.bodies],
+    pieces = build_pieces(mesh.points, tris, mesh.triangle_body(), [b.face for b in mesh.scene.bodies],
                           keep, cur.result())
     if np.any(pieces.area <= 0):
         bad = int(np.argmin(pieces.area))

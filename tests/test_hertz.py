@@ -99,7 +99,9 @@ def test_equilibrium_residual_global(hz, upper):
     # Centred differences: truncation ~ (h/d)^2 p0/a with d >= 0.05 a the distance to the
     # edge singularity, i.e. ~4e-8 p0/a for h = 1e-5 a; rounding ~ eps p0/h ~ 2e-11 p0/a.
     h = 1e-5 * a
-    s = lambda dx, dy: body_stress(x + dx, y + dy, a, p0, x_c=XC, y_face=YF, upper=upper)
+    def s(dx, dy):
+        return body_stress(x + dx, y + dy, a, p0, x_c=XC, y_face=YF, upper=upper)
+
     dx = (s(h, 0) - s(-h, 0)) / (2 * h)
     dy = (s(0, h) - s(0, -h)) / (2 * h)
     rx = dx[:, 0] + dy[:, 2]  # d sxx/dx + d sxy/dy

@@ -8,7 +8,7 @@ from cvxdual.mesh import build_mesh, graded_points
 def test_graded_points_nested_and_halving():
     # each level splits every interval of the previous one: nested points, h halves
     p = [graded_points(0.0, 30.0, 6, L, (0.0, 8.0), 6.0, [8.0]) for L in range(4)]
-    for a, b in zip(p, p[1:]):
+    for a, b in zip(p[:-1], p[1:], strict=True):
         assert len(b) == 2 * len(a) - 1
         np.testing.assert_allclose(b[::2], a, rtol=0, atol=1e-12)
         # the graded map is smooth, so halving in xi halves the largest interval up to O(h) changes
