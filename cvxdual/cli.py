@@ -52,8 +52,8 @@ def _cmd_scenes(args) -> int:
 
 def _cmd_solve(args) -> int:
     from .output import check_writable, write_outputs
-    from .scenefile import load_scene, parse_assignment
     from .pipeline import solve
+    from .scenefile import load_scene, parse_assignment
     from .solvers import resolve_solver
     from .triangulation import check_triangulation
 

@@ -275,7 +275,6 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
     """The same scene in other units: lengths multiplied by ``length``, stresses by ``stress``
     (forces per unit thickness by ``length * stress``, body forces by ``stress / length``)."""
     from .materials import Material
-    from .profiles import Profile
 
     def prof(p: Profile | None):
         if p is None:

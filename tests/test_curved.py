@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from helpers import contains
 
 import cvxdual as cd
 from cvxdual.assembly import assemble
@@ -9,8 +10,6 @@ from cvxdual.boundary import side_quadrature
 from cvxdual.locate import locate
 from cvxdual.scene import BoundaryPart, Traction
 from cvxdual.triangulation import discretize, stretches
-
-from helpers import contains
 
 CURVED = ["cylinder-on-block", "cylinder-in-groove", "wavy"]
 CASES = [(s, t, L) for s in CURVED for t in ("type1", "type2") for L in (0, 1, 2)]

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from helpers import solved
 
 import cvxdual as cd
 from cvxdual.norms import l2_norm
-
-from helpers import solved
 
 SCENES = ["patch", "hertz", "blocks", "cylinder-on-block", "cylinder-in-groove", "wavy"]
 

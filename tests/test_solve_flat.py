@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from helpers import primal, solved
 
 import cvxdual as cd
 from cvxdual.norms import l2_norm
 from cvxdual.scene import convert_units
-
-from helpers import primal, solved
 
 
 @pytest.mark.parametrize("tri", ["type1", "type2"])
