@@ -135,8 +135,9 @@ def contact_quantities(system: System, R: np.ndarray, u: np.ndarray) -> dict:
 def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=None) -> dict:
     """Relative residuals of a dual solution ``t`` with recovered displacements ``u``.
 
-    - equilibrium: largest violation of ``(T^T R)_j = 0`` (``j`` in ``J0``) and
-      ``(T^T R)_m <= 0`` (``m`` in ``J-``), over the largest term of ``Z^T (|E||t| + |f|)``;
+    - equilibrium: largest violation of ``(T^T R)_j = 0`` (every ``j`` not in ``J-``, the
+      anchors included, so the dropped rows are checked too) and ``(T^T R)_m <= 0`` (``m`` in
+      ``J-``), over the largest term of ``Z^T (|E||t| + |f|)``;
     - constitutive: ``||t - C B u||_0 / ||t||_0``;
     - complementarity: ``sum |F_k s_k| / (sum |F_k| * delta)``, ``s_k = eps_k - (u''_y - u'_y)``,
       ``delta`` the largest displacement or gap;
