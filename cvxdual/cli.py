@@ -69,13 +69,12 @@ def _cmd_solve(args) -> int:
     return 0
 
 
-STUDIES = ("convergence", "speed", "stability")
+STUDIES = ("convergence", "speed", "stability")  # built-in specs: cvxdual/study/specs/NAME.*
 
 
 def _cmd_study(args) -> int:
-    import importlib
-    mod = importlib.import_module(f"cvxdual.study.{args.name}")
-    return mod.main(args.rest)
+    from .study.command import main as study_main
+    return study_main(args)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -95,10 +94,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
-    st = sub.add_parser("study", help="run a study (convergence, speed, stability); see --help of each",
-                        add_help=False)
-    st.add_argument("name", choices=STUDIES)
-    st.add_argument("rest", nargs=argparse.REMAINDER, help="the study's own options (e.g. --quick)")
+    from .study.command import add_parser as add_study_parser
+    st = add_study_parser(sub, STUDIES)
     st.set_defaults(func=_cmd_study)
     return p
 

@@ -43,7 +43,8 @@ def atomic_path(path: str | Path):
 
 
 def to_jsonable(obj):
-    """Plain Python for JSON: NumPy scalars and arrays converted, non-finite floats as ``None``."""
+    """Plain Python for JSON: NumPy scalars and arrays converted, non-finite floats as ``None``,
+    anything else that JSON cannot hold as its ``str``."""
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -57,7 +58,9 @@ def to_jsonable(obj):
     if isinstance(obj, (np.floating, float)):
         v = float(obj)
         return v if math.isfinite(v) else None
-    return obj
+    if obj is None or isinstance(obj, (str, int)):
+        return obj
+    return str(obj)
 
 
 def json_text(data) -> str:

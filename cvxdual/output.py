@@ -132,6 +132,3 @@ def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
                           "choose a writable --out") from None
     return [final for _, final in staged]
 
-
-# TEMPORARY re-exports for the study modules being rewritten (removed when they import cvxdual.files)
-from .files import atomic_path  # noqa: E402,F401

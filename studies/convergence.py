@@ -1,14 +1,18 @@
-"""Convergence of ||lam_h - lam*||_0 for both triangulations: writes reports/convergence.*
+"""The built-in convergence study (spec: cvxdual/study/specs/convergence.*): writes reports/convergence.*
 
-    python studies/convergence.py            # the full study (about 15 minutes on 2 cores)
-    python studies/convergence.py --quick    # coarse levels, into out/convergence-quick
+    python studies/convergence.py                   # the full study, into reports/
+    python studies/convergence.py --quick           # coarse sizes, into out/convergence-quick
+    python studies/convergence.py --scheduler tcp://HOST:8786   # on a running Dask scheduler
 
-Interrupted runs resume from the cache (.cache/cvxdual). Same as `cvxdual study convergence`.
+Same as `cvxdual study convergence --out reports`; interrupted runs resume from the cache (.cache/cvxdual).
 """
 
 import sys
 
-from cvxdual.study.convergence import main
+from cvxdual.cli import main
 
 if __name__ == "__main__":
-    sys.exit(main())
+    argv = sys.argv[1:]
+    if "--out" not in argv and "--quick" not in argv:
+        argv += ["--out", "reports"]
+    sys.exit(main(["study", "convergence", *argv]))

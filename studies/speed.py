@@ -1,14 +1,18 @@
-"""Speed against error: writes reports/speed.csv, speed_scaling.png, speed_pareto.png, speed.md
+"""The built-in speed study (spec: cvxdual/study/specs/speed.*): writes reports/speed.*
 
-    python studies/speed.py            # the full study (about 40 minutes on 2 cores)
-    python studies/speed.py --quick    # small sizes, into out/speed-quick
+    python studies/speed.py                   # the full study, into reports/
+    python studies/speed.py --quick           # coarse sizes, into out/speed-quick
+    python studies/speed.py --scheduler tcp://HOST:8786   # on a running Dask scheduler
 
-Interrupted runs resume from the cache (.cache/cvxdual). Same as `cvxdual study speed`.
+Same as `cvxdual study speed --out reports`; interrupted runs resume from the cache (.cache/cvxdual).
 """
 
 import sys
 
-from cvxdual.study.speed import main
+from cvxdual.cli import main
 
 if __name__ == "__main__":
-    sys.exit(main())
+    argv = sys.argv[1:]
+    if "--out" not in argv and "--quick" not in argv:
+        argv += ["--out", "reports"]
+    sys.exit(main(["study", "speed", *argv]))

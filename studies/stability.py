@@ -1,14 +1,18 @@
-"""Numerical stability on hard cases: writes reports/stability.csv and reports/stability.md
+"""The built-in stability study (spec: cvxdual/study/specs/stability.*): writes reports/stability.*
 
-    python studies/stability.py            # every case on every path and triangulation
-    python studies/stability.py --quick    # a few cases at level <= 1, into out/stability-quick
+    python studies/stability.py                   # the full study, into reports/
+    python studies/stability.py --quick           # coarse sizes, into out/stability-quick
+    python studies/stability.py --scheduler tcp://HOST:8786   # on a running Dask scheduler
 
-Interrupted runs resume from the cache (.cache/cvxdual). Same as `cvxdual study stability`.
+Same as `cvxdual study stability --out reports`; interrupted runs resume from the cache (.cache/cvxdual).
 """
 
 import sys
 
-from cvxdual.study.stability import main
+from cvxdual.cli import main
 
 if __name__ == "__main__":
-    sys.exit(main())
+    argv = sys.argv[1:]
+    if "--out" not in argv and "--quick" not in argv:
+        argv += ["--out", "reports"]
+    sys.exit(main(["study", "stability", *argv]))

@@ -1,0 +1,333 @@
+"""What one case computes: the solve, its errors against the reference, and the row.
+
+Runs on a Dask worker (or, with ``isolate = "process"``, in a fresh interpreter started by the
+worker: ``python -m cvxdual.study.cases CASE_JSON``). References (finer levels solved by the fast
+path) are computed once per scene variant, stored as checked arrays in the cache directory and
+loaded by the workers from there (a filesystem shared by client and workers); a worker keeps
+the last reference it loaded in memory.
+
+The errors follow the convergence study of the paper's (2.4): against an exact field, a tensor
+Gauss rule of ``rule`` x ``rule`` points per piece (``check_rule`` at the finest level as a
+check); against a reference, integrated over the reference's pieces (``ref_rule`` points, and
+``ref_fine`` on the pieces that straddle studied pieces), every point located in the studied
+mesh. The reference's own error is estimated from the levels below it: with
+``d_k = ||lam_k - lam_(k+1)||`` and ``p = log2(d_(R-2) / d_(R-1))``, ``err_R ~ d_(R-1) / (2^p - 1)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CvxdualError
+from .cache import Cache, code_version, content_key
+from .spec import Case, Reference, StudyError, load_module
+
+EDGE_RADIUS = 0.1  # times a: the discs around the Hertz contact edges (0.03% of the hertz domain)
+REQUIRED = ("scene", "triangulation", "stress_space", "level", "solver", "overrides", "n_pieces", "h", "error_l2",
+            "error_l2_rel", "reference", "status", "t_total", "worker")
+
+
+def scene_of(source: str, overrides: tuple, units: tuple | None):
+    """The scene of a case: source with overrides applied, converted to ``units``."""
+    from .. import load_scene
+    from ..scene import convert_units
+    from .spec import nest
+    scene = load_scene(source, [nest(k, v) for k, v in overrides])
+    if units is not None:
+        scene = convert_units(scene, float(units[0]), float(units[1]), (str(units[2]), str(units[3])))
+    return scene
+
+
+def field_key(scene_repr: str, ref: Reference, level: int) -> str:
+    return "f" + content_key("field", scene_repr, ref.triangulation, ref.solver, level, code_version())
+
+
+def reference_key(scene_repr: str, ref: Reference, metrics: tuple) -> str:
+    m = dict(metrics)
+    return "r" + content_key("reference", scene_repr, ref, m["ref_rule"], m["ref_fine"], code_version())
+
+
+def case_key(case: Case, scene_repr: str, hooks_hash: str = "") -> str:
+    from dataclasses import replace
+    c = replace(case, scene_source="", hooks=None, isolate="", timeout=None)  # not part of the content
+    return "c" + content_key("case", scene_repr, c, hooks_hash, code_version())
+
+
+@dataclass
+class Field:
+    """A piecewise-constant stress field on a mesh (what :func:`cvxdual.norms.stress_distance` needs)."""
+
+    scene: object
+    mesh: object
+    pieces: object
+    stress: np.ndarray
+
+
+_MEMO: dict = {}  # the last reference field this process loaded: {key: Field}
+
+
+def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool = True) -> tuple[Field, bool]:
+    """The fast-path (or ``ref.solver``) solution at ``level``, from the memo, the cache, or solved
+    (and then cached); ``(field, computed)``."""
+    from .. import discretize, solve
+    key = field_key(repr(scene), ref, level)
+    if key in _MEMO:
+        return _MEMO[key], False
+    mesh, pieces, _ = discretize(scene, ref.triangulation, level)
+    hit = cache.get_arrays(key, {"stress": (len(pieces), 3)})
+    computed = hit is None
+    if computed:
+        sol = solve(scene, ref.triangulation, level, ref.solver, check=True)
+        stress = np.asarray(sol.stress, float)
+        cache.put_arrays(key, stress=stress)
+    else:
+        stress = hit["stress"]
+    f = Field(scene, mesh, pieces, stress)
+    if keep:
+        _MEMO.clear()
+        _MEMO[key] = f
+    return f, computed
+
+
+def reference_level_task(source: str, overrides: tuple, units, ref: Reference, level: int, cache_root: str) -> dict:
+    """Worker task: make sure the reference field at ``level`` is in the cache."""
+    scene = scene_of(source, overrides, units)
+    t0 = time.perf_counter()
+    f, computed = reference_field(scene, ref, level, Cache(cache_root), keep=level == ref.level)
+    return {"level": level, "n_pieces": len(f.stress), "computed": computed, "time": time.perf_counter() - t0}
+
+
+def reference_info_task(source: str, overrides: tuple, units, ref: Reference, metrics: tuple, cache_root: str,
+                        *levels_done) -> dict:
+    """Worker task: the reference's estimated error from the two levels below it (cached)."""
+    from ..norms import stress_distance
+    scene = scene_of(source, overrides, units)
+    cache = Cache(cache_root)
+    key = reference_key(repr(scene), ref, metrics)
+    hit = cache.get_row(key, ("level", "error_est", "n_pieces"))
+    if hit is not None:
+        return hit
+    m = dict(metrics)
+    R = ref.level
+    f2, _ = reference_field(scene, ref, R - 2, cache, keep=False)
+    f1, _ = reference_field(scene, ref, R - 1, cache, keep=False)
+    d2 = stress_distance(f1, f2, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    del f2
+    f0, _ = reference_field(scene, ref, R, cache)
+    d1 = stress_distance(f0, f1, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    p = float(np.log2(d2 / d1)) if d1 > 0 and d2 > d1 else float("nan")
+    est = d1 / (2**p - 1) if np.isfinite(p) and p > 0 else d1
+    info = {"level": R, "triangulation": ref.triangulation, "solver": ref.solver, "n_pieces": len(f0.stress),
+            "d_last": d1, "d_before": d2, "rate": p, "error_est": est}
+    return cache.put_row(key, info)
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return os.environ.get("CVXDUAL_STUDY_WORKER", f"local-{os.getpid()}")
+
+
+def base_row(case: Case) -> dict:
+    units = "" if case.units is None else f"{case.units[2]}, {case.units[3]}"
+    return {"study": case.study, "case": case.name, "group": case.group, "scene": case.scene,
+            "overrides": case.overrides_text, "units": units,
+            "triangulation": case.triangulation, "stress_space": case.stress_space, "level": case.level,
+            "solver": case.solver, "reference": case.reference.label(), **dict(case.tags)}
+
+
+def run_case(case: Case, ref_info: dict | None, cache_root: str | None, key: str) -> dict:
+    """Worker task: the row of ``case`` (failures become a row with their reason, never raise)."""
+    worker = _worker_name()
+    if case.isolate == "process":
+        row = _run_isolated(case, ref_info, cache_root, key)
+    else:
+        row = compute_row(case, ref_info, cache_root, key)
+    row["worker"] = worker
+    return row
+
+
+def compute_row(case: Case, ref_info: dict | None, cache_root: str | None, key: str) -> dict:
+    row = base_row(case)
+    row["started"] = now()
+    t0 = time.perf_counter()
+    try:
+        row.update(_compute(case, ref_info, Cache(cache_root), key))
+    except CvxdualError as e:
+        row["status"] = f"failed: {type(e).__name__}: {' '.join(str(e).split())}"[:300]
+    except Exception as e:  # noqa: BLE001 - any failure of one case is a row, not a dead study
+        row["status"] = f"failed: {type(e).__name__}: {' '.join(str(e).split())}"[:300]
+        row["_transient"] = True
+    row.setdefault("t_total", time.perf_counter() - t0)
+    row["finished"] = now()
+    return row
+
+
+def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
+    from .. import solve
+    scene = scene_of(case.scene_source, case.overrides, case.units)
+    if case.solver == "limit":
+        return _limit(case, scene)
+    kw = dict(case.solver_options)
+    if case.stress_space != "p0":
+        kw["stress_space"] = case.stress_space
+    prof = None
+    if case.profile:
+        import cProfile
+        prof = cProfile.Profile()
+        prof.enable()
+    sol = solve(scene, case.triangulation, case.level, case.solver, check=case.check, **kw)
+    if prof is not None:
+        prof.disable()
+    out = solution_fields(sol)
+    out.update(_errors(case, scene, sol, ref_info, cache))
+    if prof is not None:
+        import io
+        import pstats
+        buf = io.StringIO()
+        pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(18)
+        out["_profile"] = buf.getvalue()
+    if case.save_stress:
+        cache.put_arrays("s" + key, stress=np.asarray(sol.stress, float), area=np.asarray(sol.pieces.area, float))
+        out["stress_key"] = "s" + key
+    if case.hooks:
+        hook = getattr(load_module(Path(case.hooks)), "measure", None)
+        if hook is not None:
+            out.update(hook(case, sol) or {})
+    return out
+
+
+def solution_fields(sol) -> dict:
+    """The generic columns of a solved case."""
+    from ..solution import TOLERANCES
+    c, t, res = sol.contact, sol.timings, sol.residuals
+    active = np.asarray(c["active"]).astype(int)
+    return {
+        "status": sol.solver.get("status"), "n_pieces": int(sol.system.n_pieces),
+        "n_stress_unknowns": 3 * int(sol.system.n_pieces), "n_dofs": int(sol.system.n_dofs),
+        "h": float(sol.mesh.h), "h_min": float(sol.mesh.h_min), "h_ratio": float(sol.mesh.h_min / sol.mesh.h),
+        "iterations": sol.solver.get("iterations"), "duality_gap": float(sol.duality_gap),
+        **{f"res_{k}": float(v) for k, v in res.items()},
+        "within_tolerances": bool(all(res.get(k, np.inf) <= v for k, v in TOLERANCES.items())),
+        "n_active": int(c["n_active"]), "contact_x_min": c["x_min"], "contact_x_max": c["x_max"],
+        "peak_pressure": c["max_pressure"], "total_force": c["total_force"],
+        "n_patches": int(np.sum(np.diff(np.r_[0, active]) == 1)),
+        **{f"t_{k}": float(v) for k, v in t.items()},
+    }
+
+
+def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:
+    from .. import exact_field
+    from ..norms import DEFAULT_QUAD, stress_distance, stress_error
+    m = dict(case.metrics)
+    out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
+           "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
+    ref = case.reference
+    if ref.kind == "exact":
+        ex = exact_field(scene)
+        if ex is None:
+            if sol.error is None:
+                return out  # no exact field: nothing to measure (e.g. a stability case on blocks)
+        if m["rule"] == DEFAULT_QUAD and sol.error is not None:
+            err = sol.error
+        else:
+            err = stress_error(sol.system, sol.stress, ex.stress, m["rule"])
+        if case.check_rule:
+            out["error_l2_rel_finer_rule"] = stress_error(sol.system, sol.stress, ex.stress,
+                                                          m["check_rule"])["l2_rel"]
+        out["reference_error_est"] = 0.0
+        if m["edge_share"] and getattr(ex, "hertz", None) is not None:
+            out["edge_error_share"] = edge_share(sol, ex, m["rule"])
+    elif ref.kind == "finer":
+        if ref_info is None:
+            raise StudyError("internal: a finer-level reference without its info")
+        field, _ = reference_field(scene, ref, ref.level, cache)
+        err = stress_distance(field, sol, m["ref_rule"], m["ref_fine"])
+        if case.check_rule:
+            out["error_l2_rel_finer_rule"] = stress_distance(field, sol, m["ref_check_rule"],
+                                                             m["ref_check_fine"])["l2_rel"]
+        out["reference_error_est"] = ref_info["error_est"]
+    else:
+        return out
+    out.update(error_l2=err["l2"], error_l2_rel=err["l2_rel"], error_energy=err["energy"],
+               error_energy_rel=err["energy_rel"])
+    return out
+
+
+def edge_share(sol, ex, rule: int) -> float:
+    """Share of the squared L2 error within ``EDGE_RADIUS * a`` of the Hertz contact edges."""
+    from ..norms import VOIGT_WEIGHT
+    pts, w, idx = sol.pieces.quadrature(rule)
+    body = sol.pieces.body[idx]
+    ref = np.empty((len(pts), 3))
+    for k in (0, 1):
+        sel = body == k
+        ref[sel] = ex.stress(k, pts[sel])
+    e2 = w * np.sum(VOIGT_WEIGHT * (sol.stress[idx] - ref) ** 2, axis=1)
+    a = ex.hertz.a
+    near = np.hypot(np.abs(pts[:, 0] - ex.xc) - a, pts[:, 1] - ex.y_face) < EDGE_RADIUS * a
+    return float(e2[near].sum() / e2.sum())
+
+
+def _limit(case: Case, scene) -> dict:
+    """The speed "limit": one sparse factorisation plus solve of the stiffness, all pairs closed."""
+    from .. import assemble, discretize, fast
+    t0 = time.perf_counter()
+    mesh, pieces, ties = discretize(scene, case.triangulation, case.level)
+    system = assemble(mesh, pieces, ties)
+    t1 = time.perf_counter()
+    lim = fast.limit(system)
+    return {"status": "optimal", "n_pieces": int(system.n_pieces), "h": float(mesh.h), "t_setup": t1 - t0,
+            **lim, "t_total": time.perf_counter() - t0, "error_l2": np.nan, "error_l2_rel": np.nan}
+
+
+def now() -> str:
+    """The wall-clock time as an ISO 8601 UTC string (millisecond resolution)."""
+    from datetime import datetime, timezone
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+
+
+def _run_isolated(case: Case, ref_info, cache_root, key) -> dict:
+    """The case in a fresh interpreter: a clean peak memory, and a time limit."""
+    payload = json.dumps({"case": case.to_json(), "ref_info": ref_info, "cache": cache_root, "key": key})
+    cmd = [sys.executable, "-m", "cvxdual.study.cases", "-"]
+    t0 = now()
+    try:
+        p = subprocess.run(cmd, input=payload, capture_output=True, text=True, timeout=case.timeout)
+    except subprocess.TimeoutExpired:
+        return {**base_row(case), "status": f"timeout (>{case.timeout:.0f} s)", "started": t0,
+                "finished": now(), "t_total": np.nan}
+    if p.returncode != 0:
+        last = (p.stderr.strip().splitlines() or ["no output"])[-1]
+        what = "killed" if p.returncode < 0 else "failed"
+        return {**base_row(case), "status": f"{what}: exit {p.returncode}: {last}"[:300], "started": t0,
+                "finished": now(), "_transient": True}
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def _main() -> int:  # python -m cvxdual.study.cases - (the case as JSON on stdin)
+    from ..files import to_jsonable as clean
+    d = json.loads(sys.stdin.read())
+    row = compute_row(Case.from_json(d["case"]), d["ref_info"], d["cache"], d["key"])
+    row["peak_mb"] = peak_mb()
+    print(json.dumps(clean(row)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main())

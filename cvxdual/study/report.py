@@ -1,0 +1,249 @@
+"""A study's outputs: the tidy table (CSV), the markdown report with fitted rates, and the
+plots of error against h and against time.
+
+Plots take an ``ax=`` and return it; figures are :class:`matplotlib.figure.Figure` objects (no
+pyplot), so nothing here changes matplotlib's global backend or state.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..files import atomic_path, write_text
+
+LINE_KEYS = ("triangulation", "stress_space", "overrides", "solver", "units", "case")
+
+
+def fit_rate(h, e) -> float:
+    """Slope of ``log e`` against ``log h`` (``np.polyfit``), or NaN with fewer than two points."""
+    h, e = np.asarray(h, float), np.asarray(e, float)
+    ok = (h > 0) & (e > 0) & np.isfinite(e) & np.isfinite(h)
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(h[ok]), np.log(e[ok]), 1)[0])
+
+
+def ok_rows(df: pd.DataFrame) -> pd.DataFrame:
+    return df[df["status"].astype(str).str.startswith("optimal")]
+
+
+def series_keys(df: pd.DataFrame) -> list[str]:
+    """The columns that tell series apart: scene, triangulation, and whatever else varies."""
+    keys = ["scene", "triangulation"]
+    for c in ("stress_space", "overrides", "solver", "units", "case"):
+        if c in df.columns and df[c].astype(str).nunique() > 1:
+            keys.append(c)
+    return keys
+
+
+def rates(df: pd.DataFrame, last: int | None = None, keys: list[str] | None = None) -> pd.DataFrame:
+    """Fitted rates of the relative L2 and energy errors against h, per series (all levels, or
+    the last ``last``)."""
+    d = ok_rows(df)
+    d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+    keys = keys or series_keys(df)
+    out = []
+    for k, g in d.groupby(keys, sort=False):
+        g = g.sort_values("level")
+        if last is not None:
+            g = g.iloc[-last:]
+        r = dict(zip(keys, k if isinstance(k, tuple) else (k,), strict=True))
+        r.update({"levels": f"{int(g['level'].min())}-{int(g['level'].max())}",
+                  "rate_l2": fit_rate(g["h"], g["error_l2_rel"]),
+                  "rate_energy": fit_rate(g["h"], g["error_energy_rel"]) if "error_energy_rel" in g else np.nan})
+        out.append(r)
+    return pd.DataFrame(out, columns=keys + ["levels", "rate_l2", "rate_energy"])
+
+
+def rates_table(df: pd.DataFrame) -> pd.DataFrame:
+    """The report's table: rates over all levels and the last three, finest pieces and error."""
+    keys = series_keys(df)
+    all_r, last_r = rates(df, keys=keys), rates(df, 3, keys=keys)
+    d = ok_rows(df)
+    d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+    if d.empty:
+        return pd.DataFrame()
+    fin = d.loc[d.groupby(keys, sort=False)["level"].idxmax()]
+    tab = all_r.merge(last_r[keys + ["levels", "rate_l2"]], on=keys, suffixes=("", "_last3"))
+    tab = tab.merge(fin[keys + ["n_pieces", "error_l2_rel"]], on=keys)
+    tab = tab[keys + ["levels", "rate_l2", "rate_energy", "levels_last3", "rate_l2_last3", "n_pieces", "error_l2_rel"]]
+    return tab.rename(columns={"levels": "levels (all)", "levels_last3": "levels (last 3)",
+                               "rate_l2": "rate L2 (all)", "rate_l2_last3": "rate L2 (last 3)",
+                               "rate_energy": "rate energy (all)", "n_pieces": "finest pieces",
+                               "error_l2_rel": "finest rel. L2 error"})
+
+
+def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
+    cols = list(df.columns)
+    lines = ["| " + " | ".join(str(c) for c in cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in df.iterrows():
+        cells = []
+        for c in cols:
+            v = r[c]
+            if isinstance(v, (float, np.floating)):
+                cells.append("-" if not np.isfinite(v) else format(v, floatfmt))
+            elif v is None:
+                cells.append("-")
+            else:
+                cells.append(str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _label(keys: tuple, names: list[str]) -> str:
+    return ", ".join(str(v) for v in keys if str(v) != "") if names else ""
+
+
+def plot_error(df: pd.DataFrame, x: str = "h", ax=None, scene: str | None = None, reference_error: float | None = None,
+               xlabel: str | None = None):
+    """Relative L2 error against ``x`` (``h`` or ``t_total``) for one scene, a line per series;
+    returns ``ax``."""
+    if ax is None:
+        from matplotlib.figure import Figure
+        ax = Figure(figsize=(4.2, 4)).add_subplot()
+    d = ok_rows(df)
+    if scene is not None:
+        d = d[d["scene"] == scene]
+    keys = [k for k in series_keys(df) if k != "scene"]
+    marks = ("o-", "s--", "^-.", "d:", "v-", "x--")
+    for n, (k, g) in enumerate(d.groupby(keys, sort=False) if keys else [((), d)]):
+        g = g.sort_values("level")
+        k = k if isinstance(k, tuple) else (k,)
+        r = fit_rate(g["h"], g["error_l2_rel"])
+        ax.loglog(g[x], g["error_l2_rel"], marks[n % len(marks)], ms=4,
+                  label=f"{_label(k, keys)} (rate {r:.2f})")
+    if reference_error is not None and np.isfinite(reference_error) and reference_error > 0:
+        ax.axhline(reference_error, color="gray", lw=0.8, ls=":", label="reference error (est.)")
+    ax.set_title(scene or "")
+    ax.set_xlabel(xlabel or {"h": "mesh size h (largest element)", "t_total": "wall time per solve [s]"}.get(x, x))
+    ax.set_ylabel("relative L2 stress error")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    return ax
+
+
+def error_figure(df: pd.DataFrame, x: str, refs: dict | None = None, xlabel: str | None = None):
+    """A :class:`~matplotlib.figure.Figure` with one :func:`plot_error` panel per scene."""
+    from matplotlib.figure import Figure
+    scenes = list(dict.fromkeys(ok_rows(df)["scene"])) or [None]
+    fig = Figure(figsize=(4.2 * len(scenes), 4), layout="constrained")
+    axes = fig.subplots(1, len(scenes), squeeze=False)[0]
+    for ax, scene in zip(axes, scenes, strict=True):
+        est = [v.get("error_est") for k, v in (refs or {}).items() if k == scene or k.startswith(f"{scene} ")]
+        plot_error(df, x, ax=ax, scene=scene, reference_error=est[0] if len(est) == 1 else None, xlabel=xlabel)
+    return fig
+
+
+def save_figure(fig, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    return path
+
+
+def write_csv(df: pd.DataFrame, path: Path) -> Path:
+    cols = [c for c in df.columns if not str(c).startswith("_") and c != "stress_key"]
+    with atomic_path(path) as tmp:
+        df[cols].to_csv(tmp, index=False, float_format="%.6g")
+    return path
+
+
+def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
+    out = []
+    rule = _metric(df, "rule")
+    by = [c for c in ("scene", "overrides", "units") if c in df.columns]
+    for k, g in df.groupby(by, sort=False):
+        k = k if isinstance(k, tuple) else (k,)
+        scene = k[0]
+        label = scene + (f" ({k[1]})" if len(k) > 1 and k[1] else "") + (f" [{k[2]}]" if len(k) > 2 and k[2] else "")
+        ref = str(g["reference"].iloc[0])
+        levels = sorted(g["level"].unique())
+        n = pd.to_numeric(g["n_pieces"], errors="coerce").dropna()
+        size = f", {int(n.min())} to {int(n.max())} pieces" if len(n) else ""
+        if ref == "exact":
+            how = "against the exact field" + (f", {rule}x{rule} Gauss points per piece" if rule else "")
+        elif ref == "none":
+            how = "no reference"
+        elif label in refs:
+            r = refs[label]
+            how = (f"against a reference: {r['triangulation'].replace('type', 'type ')}, level {r['level']} "
+                   f"({r['n_pieces']} pieces), {'fast path' if r.get('solver') == 'fast' else r.get('solver')}, "
+                   f"{_metric(df, 'ref_rule', 2)}x{_metric(df, 'ref_rule', 2)} points per reference piece "
+                   f"({_metric(df, 'ref_fine', 6)}x{_metric(df, 'ref_fine', 6)} on those straddling studied "
+                   f"pieces); its estimated relative error is {r['error_est']:.2g} (last differences "
+                   f"{r['d_before']:.3g}, {r['d_last']:.3g}, rate {r['rate']:.2f})")
+        else:
+            how = f"against a reference ({ref})"
+        out.append(f"- `{label}`: levels {min(levels)}-{max(levels)}{size}; {how}.")
+    return out
+
+
+def _metric(df: pd.DataFrame, name: str, default=None):
+    return df.attrs.get("metrics", {}).get(name, default)
+
+
+def markdown(df: pd.DataFrame, study, out_name: str) -> str:
+    """The markdown report: setup, fitted rates, monotonicity, failures, and the spec's sections."""
+    refs = df.attrs.get("references", {})
+    cfg = {"setup": True, "rates": True, "plots": True, **(study.report or {})}
+    src = study.path.name if study.path is not None else "a dict"
+    lines = [f"# {study.title}", "",
+             f"Generated by `cvxdual study run {src}" + (" --quick" if study.quick else "")
+             + f"` (CSV: `{out_name}.csv`" + (f"; plots: `{out_name}_h.png`, `{out_name}_time.png`" if cfg["plots"]
+                                             else "") + ")." + (f" {study.description.strip()}" if study.description
+                                                                 else ""), ""]
+    if cfg["setup"]:
+        lines += ["## Setup", ""] + setup_lines(df, refs)
+        chk = df[np.isfinite(pd.to_numeric(df.get("error_l2_rel_finer_rule", pd.Series(dtype=float)),
+                                           errors="coerce"))] if "error_l2_rel_finer_rule" in df else df.iloc[:0]
+        if len(chk):
+            dev = (chk["error_l2_rel_finer_rule"].astype(float) / chk["error_l2_rel"].astype(float) - 1).abs()
+            lines += ["", f"Quadrature check: at the finest level of each series a finer rule "
+                      f"({_metric(df, 'check_rule', 10)}x{_metric(df, 'check_rule', 10)} for the exact field, "
+                      f"{_metric(df, 'ref_check_rule', 3)}x{_metric(df, 'ref_check_rule', 3)} and "
+                      f"{_metric(df, 'ref_check_fine', 8)}x{_metric(df, 'ref_check_fine', 8)} against references) "
+                      f"changes the relative error by at most {100 * dev.max():.2g}%."]
+        lines.append("")
+    if cfg["rates"]:
+        tab = rates_table(df)
+        lines += ["## Fitted rates (relative L2 error against h, least squares in log-log)", "",
+                  md_table(tab) if len(tab) else "No series with errors.", ""]
+        d = ok_rows(df)
+        d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+        keys = series_keys(df)
+        mono = {" ".join(str(x) for x in (k if isinstance(k, tuple) else (k,)) if str(x)):
+                bool(np.all(np.diff(g.sort_values("level")["error_l2_rel"].astype(float)) < 0))
+                for k, g in d.groupby(keys, sort=False)}
+        if mono:
+            lines += ["Errors decrease monotonically with h: "
+                      + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in mono.items()) + ".", ""]
+    bad = df[~df["status"].astype(str).str.startswith("optimal")]
+    if len(bad) and cfg.get("failures", True):
+        lines += ["## Failed cases", "", md_table(bad[[c for c in ("case", "scene", "overrides", "triangulation",
+                                                                      "level", "solver", "status", "worker")
+                                                       if c in bad.columns]]), ""]
+    return "\n".join(lines)
+
+
+def write_outputs(df: pd.DataFrame, study, out: str | Path) -> list[Path]:
+    """Write ``NAME.csv``, ``NAME_h.png``, ``NAME_time.png`` and ``NAME.md`` to ``out``."""
+    from ..output import prepare_dir
+    out = prepare_dir(out)
+    name = study.name
+    cfg = {"plots": True, **(study.report or {})}
+    written = [write_csv(df, out / f"{name}.csv")]
+    if cfg["plots"] and len(ok_rows(df)):
+        refs = df.attrs.get("references", {})
+        for x, suffix, label in (("h", "_h", "mesh size h (largest element)"),
+                                 ("t_total", "_time", "wall time per solve [s]")):
+            written.append(save_figure(error_figure(df, x, refs, label), out / f"{name}{suffix}.png"))
+    text = markdown(df, study, name)
+    if study.report_hook is not None:
+        extra = study.report_hook(df, study, out)
+        if extra:
+            text += "\n" + extra.strip() + "\n"
+    write_text(out / f"{name}.md", text.rstrip() + "\n")
+    written.append(out / f"{name}.md")
+    return written

@@ -1,0 +1,282 @@
+"""Speed against error: time per phase and memory against size for both paths and the "limit"
+(one sparse factorisation plus solve of the stiffness), error against wall time, and the QP
+solvers CVXPY offers. Every case runs in a fresh process (``isolate = "process"``: a clean peak
+memory, a time limit); ratios are taken between numbers measured in the same run.
+Run: ``cvxdual study speed [--quick] [--out reports]``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+SCAN_SCENE = "hertz"
+SCAN_COLUMNS = 10  # level L has about 24 * 10 * 4**L pieces: 1e3 (L=1) .. 1e6 (L=6)
+CVXPY_TIMEOUT = 600.0  # "as far as the CVXPY path goes in 10 minutes"
+SOLVER_TIMEOUT = 300.0
+SOLVERS_LEVEL, QUICK_SOLVERS_LEVEL = 2, 0
+# the QP solvers CVXPY can call that are compared (their options: cvxdual.solvers.SOLVER_OPTIONS)
+QP_CANDIDATES = ("CLARABEL", "SCS", "ECOS", "CVXOPT", "HIGHS", "QOCO", "OSQP", "PIQP", "PROXQP", "DAQP")
+QUICK_SOLVERS = ("CLARABEL", "OSQP", "SCS")
+UNIFORM = {"mesh": {"grading": 1.0}}
+# stronger grading for "1 % in 1 s" on hertz: elements concentrated on the contact zone
+HERTZ_SHARP = {"mesh": {"grading": 50.0, "focus": [0.0, 7.0], "columns": 6},
+               "bodies": {"cylinder": {"focus_depth": 6.0, "layers": 5}, "block": {"focus_depth": 6.0, "layers": 5}}}
+
+
+def _installed() -> list[str]:
+    import cvxpy as cp
+    have = set(cp.installed_solvers())
+    return [s for s in QP_CANDIDATES if s in have]
+
+
+def _pareto(scene: str) -> list[dict]:
+    ref = "exact" if scene == "hertz" else {"level": 7}
+    qref = "exact" if scene == "hertz" else {"level": 4}
+    out = []
+    for mesh, over in (("graded", []), ("uniform", [UNIFORM])):
+        for solver, levels, quick in (("fast", [1, 2, 3, 4, 5, 6], [1, 2]), ("CLARABEL", [1, 2, 3, 4], [1])):
+            out.append({"name": f"pareto {mesh}", "tags": {"part": "pareto", "mesh": mesh},
+                        "scenes": [{"source": scene, "reference": ref}], "overrides": over,
+                        "triangulations": ["type1", "type2"], "solvers": [solver], "levels": levels,
+                        "quick": {"levels": quick, "scenes": [{"source": scene, "reference": qref}]}})
+    return out
+
+
+SPEC = {
+    "name": "speed",
+    "title": "Speed against error",
+    "description": (
+        "Machine: 2 cores; every measurement in its own process, all ratios from one run. Paths: `cvxpy` = the "
+        "dual QP built in CVXPY and solved by Clarabel (the reference path); `fast` = the condensed displacement "
+        "form solved by a primal-dual active set method with sparse SPD factorisations, warm-started from level "
+        "L-2 (`cvxdual.fast`). `limit` = one sparse SPD factorisation plus solve of the stiffness `K` (all "
+        "contact pairs closed), the same size and sparsity as the fast path's matrix; it excludes building `K`."),
+    "isolate": "process",
+    "report": {"setup": False, "rates": False, "plots": False},
+    "compare": [*_installed(), "fast"],
+    "cases": [
+        {"name": "scan", "tags": {"part": "scan"}, "scenes": [SCAN_SCENE],
+         "overrides": {"mesh": {"columns": SCAN_COLUMNS}},
+         "levels": [1, 2, 3, 4, 5, 6], "solvers": ["limit", "fast", "CLARABEL"], "timeout": CVXPY_TIMEOUT,
+         "quick": {"levels": [1, 2]}},
+        {"name": "profile", "tags": {"part": "profile"}, "scenes": [SCAN_SCENE],
+         "overrides": {"mesh": {"columns": SCAN_COLUMNS}}, "levels": [6], "solvers": ["fast"], "profile": True,
+         "quick": {"levels": [2]}},
+        *_pareto("hertz"), *_pareto("cylinder-in-groove"),
+        {"name": "pareto sharply graded", "tags": {"part": "pareto", "mesh": "sharply graded"}, "scenes": ["hertz"],
+         "overrides": HERTZ_SHARP, "solvers": ["fast"], "levels": [1, 2, 3, 4, 5, 6], "quick": {"levels": [1, 2]}},
+        {"name": "solvers", "tags": {"part": "solvers"}, "scenes": ["hertz", "cylinder-in-groove"],
+         "triangulations": ["type2"], "levels": [SOLVERS_LEVEL], "solvers": [*_installed(), "fast"],
+         "check": False, "reference": "none", "timeout": SOLVER_TIMEOUT,
+         "quick": {"levels": [QUICK_SOLVERS_LEVEL], "solvers": [s for s in _installed() if s in QUICK_SOLVERS]
+                   + ["fast"]}},
+    ],
+}
+
+
+def measure(case, sol) -> dict:
+    """The fast path of the scan also writes its summary.json: "mesh to written summary" time."""
+    tags = dict(case.tags)
+    if tags.get("part") != "scan" or case.solver != "fast":
+        return {}
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from cvxdual.files import atomic_path
+    from cvxdual.files import to_jsonable as clean
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as d:
+        with atomic_path(Path(d) / "summary.json") as tmp:
+            Path(tmp).write_text(json.dumps(clean(sol.summary()), indent=2))
+    t = time.perf_counter() - t0
+    return {"t_write": t, "t_end_to_end": sol.timings["total"] + t}
+
+
+def _ok(d: pd.DataFrame) -> pd.Series:
+    return d["status"].astype(str).str.startswith("optimal")
+
+
+def _paths(df: pd.DataFrame) -> pd.DataFrame:
+    d = df.copy()
+    d["path"] = np.where(d["solver"].isin(["limit", "fast"]), d["solver"], "cvxpy")
+    for c in ("t_limit", "t_factor", "peak_mb", "t_end_to_end", "t_solve", "t_build", "t_total", "mesh",
+              "paths_agree_l2_rel", "res_equilibrium", "_profile", "iterations"):
+        if c not in d:
+            d[c] = np.nan
+    return d
+
+
+def report(df: pd.DataFrame, study, out) -> str:
+    from cvxdual.study.report import md_table
+    d = _paths(df)
+    scan, pareto, solv = (d[d.part == p] for p in ("scan", "pareto", "solvers"))
+    prof = d[d.part == "profile"]
+    if out is not None:
+        _plots(scan, pareto, out)
+    level = int(solv.level.iloc[0]) if len(solv) else SOLVERS_LEVEL
+    lines = [
+        "Plots: `speed_scaling.png`, `speed_pareto.png`.", "",
+        "## Targets", "", md_table(pd.DataFrame(_targets(scan, pareto))), "",
+        f"## Time and memory against size (`{SCAN_SCENE}`, {SCAN_COLUMNS} columns at level 0)", "",
+        md_table(_scan_table(scan)), "",
+        "Growth exponents (time ~ pieces^k, fitted from 1e4 pieces up):", "", md_table(_exponents(scan)), "",
+        "## Where the time goes (profile of the largest fast-path run)", "", "```",
+        _trim_profile(str(prof["_profile"].iloc[0]) if len(prof) and isinstance(prof["_profile"].iloc[0], str)
+                      else ""), "```", "",
+        "## Error against wall time", "",
+        "Both triangulations, graded (the scene's own) and uniform meshes, both paths; `hertz` also with a sharply "
+        "graded mesh. `cylinder-in-groove` is measured against a type 2 reference two levels finer (as in the "
+        "convergence study).", "",
+        md_table(_pareto_table(pareto)), "",
+        f"## QP solvers through CVXPY (level {level}, type 2)", "",
+        "`diff to fast` is the relative L2 distance of the stresses to the fast path's exact solution of the same "
+        "discrete problem; `accepted` says whether the package's accuracy checks pass (they are required for a "
+        "result to be returned).", "",
+        md_table(_solver_table(solv[solv.solver != "fast"])), ""]
+    return "\n".join(lines)
+
+
+def _scan_table(scan: pd.DataFrame) -> pd.DataFrame:
+    ok = _ok(scan)
+    lim = scan[scan.path == "limit"].set_index("level")
+    rows = []
+    for L in sorted(scan.level.unique()):
+        r = {"level": L, "pieces": int(lim.loc[L, "n_pieces"]) if L in lim.index else np.nan,
+             "limit s": lim.loc[L, "t_limit"] if L in lim.index else np.nan}
+        for path in ("fast", "cvxpy"):
+            g = scan[(scan.path == path) & (scan.level == L)]
+            good = len(g) and bool(ok[g.index[0]])
+            r[f"{path} solve s"] = g.t_solve.iloc[0] if good else np.nan
+            r[f"{path} total s"] = g.t_total.iloc[0] if good else np.nan
+            r[f"{path} solve / limit"] = g.t_solve.iloc[0] / r["limit s"] if good else np.nan
+            r[f"{path} MB"] = g.peak_mb.iloc[0] if good else np.nan
+            if len(g) and not good:
+                r["note"] = f"{path}: {g.status.iloc[0]}"
+        cv = scan[(scan.path == "cvxpy") & (scan.level == L) & ok]
+        if len(cv):
+            r["cvxpy build share"] = cv.t_build.iloc[0] / cv.t_total.iloc[0]
+        rows.append(r)
+    return pd.DataFrame(rows)
+
+
+def _exponents(scan: pd.DataFrame) -> pd.DataFrame:
+    from cvxdual.study.report import fit_rate
+    rows = []
+    for path in ("fast", "cvxpy", "limit"):
+        d = scan[(scan.path == path) & _ok(scan)]
+        d = d[d.n_pieces >= 1e4]  # growth exponents from the sizes where fixed costs no longer dominate
+        cols = ["t_limit", "t_factor"] if path == "limit" else ["t_mesh", "t_assemble", "t_build", "t_solve",
+                                                                 "t_recover", "t_total"]
+        for c in cols + ["peak_mb"]:
+            if c in d and len(d) >= 2:
+                rows.append({"path": path, "quantity": c, "exponent": fit_rate(d.n_pieces, d[c]),
+                             "sizes": f"{int(d.n_pieces.min())}-{int(d.n_pieces.max())}"})
+    return pd.DataFrame(rows, columns=["path", "quantity", "exponent", "sizes"])
+
+
+def _trim_profile(text: str) -> str:
+    return "\n".join([ln for ln in text.splitlines() if ln.strip()][:32])
+
+
+def _targets(scan: pd.DataFrame, pareto: pd.DataFrame) -> list[dict]:
+    out = []
+    ok = _ok(scan)
+    lim = scan[scan.path == "limit"].set_index("level")
+    f = scan[(scan.path == "fast") & ok & (scan.n_pieces >= 1e5)]
+    if len(f) and len(lim):
+        ratio = max(r.t_solve / lim.loc[r.level, "t_limit"] for r in f.itertuples())
+        out.append({"target": "fast path at >= 1e5 pieces: solve <= 3 x limit",
+                    "measured": f"worst ratio {ratio:.2f} at " + ", ".join(str(int(n)) for n in f.n_pieces),
+                    "met": "yes" if ratio <= 3 else "no"})
+    big = scan[(scan.path == "fast") & ok & (scan.n_pieces >= 9e5)]
+    if len(big):
+        t = float(big.t_end_to_end.iloc[0])
+        out.append({"target": "1e6 pieces end to end (mesh to written summary.json), fast path, <= 60 s",
+                    "measured": f"{t:.1f} s at {int(big.n_pieces.iloc[0])} pieces", "met": "yes" if t <= 60 else "no"})
+    cv = scan[(scan.path == "cvxpy") & ok & (scan.n_pieces >= 5e4)]
+    if len(cv):
+        r = cv.iloc[(cv.n_pieces - 1e5).abs().argsort().iloc[0]]
+        share = r.t_build / r.t_total
+        out.append({"target": "CVXPY build + canonicalisation <= 20% of the CVXPY path at 1e5 pieces",
+                    "measured": f"{100 * share:.1f}% at {int(r.n_pieces)} pieces",
+                    "met": "yes" if share <= 0.2 else "no"})
+    h = pareto[(pareto.scene == "hertz") & _ok(pareto)]
+    good = h[h.error_l2_rel <= 0.01]
+    target = "hertz: 1% relative L2 stress error in <= 1 s of solve time"
+    if len(good):
+        b = good.loc[good.t_solve.idxmin()]
+        out.append({"target": target, "measured": f"{100 * b.error_l2_rel:.2f}% in {b.t_solve:.2f} s solve "
+                    f"({b.path}, {b.mesh}, level {int(b.level)}, {int(b.n_pieces)} pieces)",
+                    "met": "yes" if b.t_solve <= 1 else "no"})
+    else:
+        out.append({"target": target, "measured": "no run reached 1%", "met": "no"})
+    return out
+
+
+def _pareto_table(p: pd.DataFrame) -> pd.DataFrame:
+    d = p[_ok(p)]
+    cols = ["scene", "mesh", "triangulation", "path", "level", "n_pieces", "error_l2_rel", "t_solve", "t_total"]
+    return d[cols].sort_values(["scene", "mesh", "triangulation", "path", "level"])
+
+
+def _solver_table(s: pd.DataFrame) -> pd.DataFrame:
+    from cvxdual.solution import TOLERANCES
+    rows = []
+    for r in s.itertuples():
+        res = {k: getattr(r, f"res_{k}", np.nan) for k in TOLERANCES}
+        accepted = str(r.status).startswith("optimal") and all(np.isfinite(v) and v <= TOLERANCES[k]
+                                                               for k, v in res.items())
+        rows.append({"scene": r.scene, "solver": r.solver, "status": str(r.status)[:60], "solve s": r.t_solve,
+                     "iterations": r.iterations, "diff to fast": r.paths_agree_l2_rel,
+                     "equilibrium": res.get("equilibrium", np.nan), "accepted": "yes" if accepted else "no"})
+    return pd.DataFrame(rows)
+
+
+def _plots(scan: pd.DataFrame, pareto: pd.DataFrame, out) -> None:
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    from cvxdual.study.report import save_figure
+    fig = Figure(figsize=(15, 4.5), layout="constrained")
+    axes = fig.subplots(1, 3)
+    ok = _ok(scan)
+    lim = scan[scan.path == "limit"]
+    for path, mk in (("fast", "o-"), ("cvxpy", "s-")):
+        d = scan[(scan.path == path) & ok]
+        axes[0].loglog(d.n_pieces, d.t_total, mk, label=f"{path}: total")
+        axes[0].loglog(d.n_pieces, d.t_solve, mk.replace("-", ":"), label=f"{path}: solve")
+        axes[2].loglog(d.n_pieces, d.peak_mb, mk, label=path)
+    axes[0].loglog(lim.n_pieces, lim.t_limit, "k^-", label="limit: factorise + solve K")
+    axes[2].loglog(lim.n_pieces, lim.peak_mb, "k^-", label="limit")
+    d = scan[(scan.path == "cvxpy") & ok]
+    for ph in ("mesh", "assemble", "build", "solve", "recover"):
+        axes[1].loglog(d.n_pieces, d[f"t_{ph}"], "s-", label=f"cvxpy {ph}")
+    f = scan[(scan.path == "fast") & ok]
+    for ph in ("solve", "recover"):
+        axes[1].loglog(f.n_pieces, f[f"t_{ph}"], "o--", label=f"fast {ph}")
+    for ax, t, y in zip(axes, ("time against size", "time per phase", "peak memory"), ("seconds", "seconds", "MB"),
+                        strict=True):
+        ax.set(xlabel="pieces", title=t, ylabel=y)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    save_figure(fig, Path(out) / "speed_scaling.png")
+    scenes = list(dict.fromkeys(pareto.scene)) or ["hertz"]
+    fig = Figure(figsize=(7 * len(scenes), 5), layout="constrained")
+    for ax, scene in zip(fig.subplots(1, len(scenes), squeeze=False)[0], scenes, strict=True):
+        d = pareto[(pareto.scene == scene) & _ok(pareto)]
+        for (mesh, tri, path), g in d.groupby(["mesh", "triangulation", "path"], sort=False):
+            g = g.sort_values("level")
+            ax.loglog(g.t_total, g.error_l2_rel, "o-" if path == "fast" else "s--", ms=4,
+                      label=f"{path}, {mesh}, {tri}")
+        if scene == "hertz":
+            ax.axhline(0.01, color="gray", lw=0.8, ls=":")
+        ax.set(xlabel="wall time per solve, mesh to solution [s]", ylabel="relative L2 stress error",
+               title=f"{scene}: error against time")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    save_figure(fig, Path(out) / "speed_pareto.png")

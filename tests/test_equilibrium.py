@@ -1,0 +1,225 @@
+"""The equilibrium (Johnson-Mercier) stress space and the certified bounds (docs/equilibrium.md)."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import cvxdual as cd
+from cvxdual.bounds import (
+    admissible_displacement,
+    certified_bounds,
+    constraint_blocks,
+    contact_slack,
+    exact_errors,
+    residuals,
+    vtu_cells,
+)
+from cvxdual.equilibrium import (
+    EquilibriumModel,
+    EquilibriumSpace,
+    divergence_rows,
+    edge_dof_rows,
+    internal_rows,
+    local_basis,
+    make_exact,
+    rigid_modes,
+)
+from cvxdual.errors import SceneError
+
+# Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision
+# times the O(10-100) terms of a row); 1e-12 leaves a margin of 10-100.
+EXACT = 1e-12
+
+
+@functools.lru_cache(maxsize=None)
+def eq(scene: str, level: int):
+    space = EquilibriumSpace.from_scene(cd.load_scene(scene), level)
+    model = EquilibriumModel(space)
+    model.solve()
+    return space, model
+
+
+@functools.lru_cache(maxsize=None)
+def p0(scene: str, level: int):
+    return cd.solve(cd.load_scene(scene), "type1", level, solver="fast")
+
+
+@functools.lru_cache(maxsize=None)
+def bounds(scene: str, level: int):
+    space, model = eq(scene, level)
+    return certified_bounds(space, model.stresses(), p0(scene, level).displacement)
+
+
+# -- the element -----------------------------------------------------------------------------
+
+def test_local_counts_and_basis_exact():
+    """27 vertex values - 12 independent internal conditions = 15 = 12 edge dofs + 3 bubbles;
+    the divergence maps the 15 onto the 6 sub-triangle constants (9 self-equilibrated modes)."""
+    space = EquilibriumSpace.from_scene(cd.load_scene("hertz"), 0)
+    X = space.X
+    ng = space.edges["ng"][space.edges["id"]]
+    s_int = np.linalg.svd(internal_rows(X), compute_uv=False)
+    # rank decisions: the smallest kept singular value is >1e-3 of the largest, dropped ones are 0
+    assert np.all(s_int[:, -1] > 1e-3 * s_int[:, 0])  # 12 independent internal conditions
+    N = local_basis(X, ng)
+    assert N.shape == (space.n_tri, 27, 15)
+    assert np.abs(internal_rows(X) @ N).max() < 1e-13  # no internal jump: rounding only
+    D = edge_dof_rows(ng) @ N
+    assert np.abs(D - np.eye(12, 15)[None]).max() < 1e-13  # dual to the edge dofs, bubbles carry none
+    s_div = np.linalg.svd(divergence_rows(X)[0] @ N, compute_uv=False)
+    assert np.all(s_div[:, -1] > 1e-3 * s_div[:, 0])  # div onto R^6 on every triangle
+
+
+@pytest.mark.parametrize("scene,floating", [("patch", 0), ("hertz", 1), ("blocks", 0)])
+def test_no_spurious_modes(scene, floating):
+    """All equality conditions on the vertex values (internal and shared traction jumps,
+    divergence, boundary and contact tangential tractions, action = reaction) have rank
+    rows - m, m the rigid motions of both bodies that keep them in contact (hertz: the common
+    vertical translation). Equivalently the displacement multipliers are unique up to those
+    motions: no spurious kinematic mode, and the reduced div system has the same defect."""
+    space = EquilibriumSpace.from_scene(cd.load_scene(scene), 0)
+    assert rigid_modes(space.mesh, joint=True).shape[2] == floating
+    blocks = constraint_blocks(space)
+    M = sp.vstack([m for m, _, sense in blocks.values() if sense == "=="]).tocsr()
+    for G in ((M @ M.T).toarray(), (space.div @ space.stress_map).toarray()):
+        G = G @ G.T if G.shape[0] != G.shape[1] else G
+        ev = np.linalg.eigvalsh(G) / np.abs(G).max()
+        # measured: zero eigenvalues ~1e-17, the next ~1e-6 (level 0): 1e-12 splits them safely
+        assert np.sum(np.abs(ev) < 1e-12) == floating
+
+
+def test_curved_face_refused():
+    with pytest.raises(SceneError, match="flat faces"):
+        EquilibriumSpace.from_scene(cd.load_scene("cylinder-on-block"), 0)
+
+
+# -- patch test ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("level", [1, 2, 3])
+def test_patch_exact(level):
+    space, model = eq("patch", level)
+    sig = model.stresses()
+    exact = cd.exact_field(space.scene)
+    err = exact_errors(space, sig, p0("patch", level).displacement, exact, n=2)
+    assert err["l2_rel"] < 1e-8  # the uniform stress is in the space: only the solver's 1e-8 tolerance remains
+    b = bounds("patch", level)
+    assert b["guaranteed"], b["reasons"]
+    # G is the square of the solver error (~1e-9) plus rounding: 1e-10 of the energy has margin 100
+    assert 0 <= b["gap"] <= 1e-10 * b["complementary_energy"]
+    assert b["energy_lower"] <= b["energy_upper"]
+
+
+# -- exactness of the admissibility ------------------------------------------------------------
+
+@pytest.mark.parametrize("scene", ["hertz", "blocks"])
+def test_every_constraint_exact_after_post_step(scene):
+    space, model = eq(scene, 1)
+    res = residuals(space, model.stresses())
+    assert set(res) == {"internal", "divergence", "shared", "traction", "contact_tangential",
+                        "action_reaction", "sign"}
+    assert max(res.values()) < EXACT, res
+    # the post-step repairs a solution 1e-7 off (a loose solver): perturb and restore
+    rng = np.random.default_rng(0)
+    y = model.y_exact + 1e-7 * space.scales.stress * rng.standard_normal(space.n_y)
+    ci = space.contact_y.ravel()
+    active = y[ci] < -1e-3 * space.scales.stress
+    y[ci[~active]] = 1e-7 * space.scales.stress  # inactive ends pushed into tension
+    bad = residuals(space, space.stress_map @ y + space.sigma0)
+    assert bad["divergence"] > 1e-9 and bad["sign"] > 1e-9  # the perturbation is visible
+    fixed, info = make_exact(space, y)
+    good = residuals(space, space.stress_map @ fixed + space.sigma0)
+    assert max(good.values()) < EXACT, good
+    assert np.all(fixed[ci] <= 0)
+    assert info["max_change"] < 1e-5  # relative: the repair is of the size of the perturbation
+
+
+# -- the bounds ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("scene", ["hertz", "blocks"])
+def test_hypercircle_identity(scene):
+    b = bounds(scene, 1)
+    c = b["contributions"]
+    assert np.all(c["sub"] >= 0) and np.all(c["contact"] >= 0)  # both terms are non-negative
+    assert b["gap"] == pytest.approx(c["element"].sum() + c["contact"].sum(), rel=1e-12)
+    # J(v) + L(u0) + S(sigma) against the two-term form: cancellation of O(|J|) terms, so the
+    # agreement is judged relative to |J| (rounding ~1e-15; admissibility ~1e-14)
+    assert abs(b["gap_identity"] - b["gap"]) < 1e-10 * abs(b["energy_upper"])
+    assert b["energy_lower"] <= b["energy_upper"]
+    assert b["guaranteed"] == (scene == "blocks")  # hertz: its exact tractions are not linear on edges
+    if scene == "hertz":
+        assert b["data_oscillation"] > 0 and "oscillation" in b["reasons"][0]
+
+
+def test_displacement_made_pointwise_admissible():
+    space, _ = eq("hertz", 1)
+    u = p0("hertz", 1).displacement
+    x = np.linspace(*space.scene.contact, 20001)
+    up, lo = space.mesh.pairs.T
+
+    def slack(v):
+        jump = np.interp(x, space.mesh.pair_x, v[lo, 1] - v[up, 1])
+        return space.scene.gap_at(x) - jump
+
+    assert slack(u).min() < -1e-4  # the trap: the chord of a convex gap lies above it
+    v, info = admissible_displacement(space, u)
+    assert slack(v).min() >= 0 and contact_slack(space, v)[1].min() >= 0
+    fixed = cd.equilibrium.support_mask(space.mesh)
+    assert np.array_equal(v[fixed], u[fixed])  # supports untouched: v stays in V
+    assert info["max_shift"] == pytest.approx(-info["min_slack_before"], rel=1e-6)
+
+
+@functools.lru_cache(maxsize=None)
+def hertz_energy():
+    """``J(u) = -(1/2 (A lam*, lam*) + int p* eps)``, the first by quadrature on level 2, the
+    second in closed form: ``int_0^a p0 sqrt(1 - x^2/a^2) x^2/(2R) dx = pi p0 a^3 / (32 R)``."""
+    space, model = eq("hertz", 2)
+    ex = cd.exact_field(space.scene)
+    e = exact_errors(space, model.stresses(), p0("hertz", 2).displacement, ex, n=8)
+    h = ex.hertz
+    return -(0.5 * e["reference_A"] ** 2 + np.pi * h.p0 * h.a**3 / (32 * h.R))
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_hertz_errors_and_bounds(level):
+    space, model = eq("hertz", level)
+    b = bounds("hertz", level)
+    ex = cd.exact_field(space.scene)
+    e = exact_errors(space, model.stresses(), b["displacement"], ex)
+    assert b["gap"] >= 0
+    assert e["l2_rel"] < p0("hertz", level).error["l2_rel"]  # measured: 4x (level 0) to 9x (level 2) smaller
+    # sqrt(2G) bounds sqrt(||u - v||_a^2 + ||sigma - lam*||_A^2), with ||u - v||_a = ||lam* - C e(v)||_A
+    # computed from the exact stress alone; measured effectivity 1.09-1.12, so the bound is not
+    # loose enough to hide an error. (Strictly it bounds the problem with projected tractions;
+    # their oscillation is 1e-2 of the bound at level 0 and falls like h^2.5.)
+    assert e["combined"] <= b["error_bound"] <= 1.5 * e["combined"]
+    J = hertz_energy()
+    # the bracket must contain J(u); its width (> 40) dwarfs the quadrature error of J (< 0.02)
+    assert b["energy_lower"] <= J <= b["energy_upper"]
+
+
+def test_vtu_cells():
+    space, model = eq("blocks", 0)
+    out = vtu_cells(space, model.stresses())
+    n_sub = 3 * space.n_tri
+    assert out["points"].shape == (3 * n_sub, 2) and out["cells"].shape == (n_sub, 3)
+    assert out["point_stress"].shape == (3 * n_sub, 3) and set(out["cell_body"]) == {0, 1}
+
+
+def test_unbalanced_loads_refused():
+    """hertz floats vertically: replacing the exact traction on the cylinder's top by a uniform
+    pull leaves the loads unbalanced on that motion, which no stress field can carry."""
+    from dataclasses import replace
+
+    from cvxdual.errors import UnbalancedLoadError
+    scene = cd.load_scene("hertz")
+    up = scene.upper
+    parts = tuple(replace(p, traction=cd.Traction("uniform", (0.0, -2000.0))) if p.on == "far" else p
+                  for p in up.boundary)
+    bad = replace(scene, bodies=(replace(up, boundary=parts), scene.lower))
+    with pytest.raises(UnbalancedLoadError, match="unbalanced"):
+        EquilibriumSpace.from_scene(bad, 0)
+    assert EquilibriumSpace.from_scene(scene, 0).load_imbalance < 1e-12  # quadrature rounding only

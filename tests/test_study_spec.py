@@ -1,0 +1,155 @@
+"""Study specs, the checked cache and the command line (no cluster: fast), and the built-in
+specs' quick variants on one shared local cluster."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cvxdual.cli import main
+from cvxdual.study import StudyError, builtin_specs, load_spec, run
+from cvxdual.study.cache import Cache
+from cvxdual.study.runner import local_config
+
+
+def test_spec_expands_grid(tmp_path):
+    (tmp_path / "s.toml").write_text('base = "blocks"\n')
+    (tmp_path / "g.toml").write_text(
+        'name = "g"\nscenes = ["s.toml", "hertz"]\ntriangulations = ["type1", "type2"]\nlevels = [0, 1]\n'
+        'solvers = ["fast", "clarabel"]\nreference = "none"\n[set]\n"mesh.grading" = [1.0, 2.0, 4.0]\n'
+        '[quick]\nlevels = [0]\n')
+    st = load_spec(tmp_path / "g.toml")
+    assert len(st.cases) == 2 * 2 * 2 * 2 * 3
+    assert {c.solver for c in st.cases} == {"fast", "CLARABEL"}
+    assert st.cases[0].overrides_text == "mesh.grading=1.0"
+    assert len(load_spec(tmp_path / "g.toml", quick=True).cases) == 2 * 2 * 2 * 3
+    assert {"convergence", "speed", "stability"} <= set(builtin_specs())
+    for name in ("convergence", "stability"):
+        assert load_spec(name, quick=True).cases
+
+
+@pytest.mark.parametrize("text, words", [
+    ('scenes = ["hertz"]\nlevels = [0]\nbogus = 1\n', "unknown key 'bogus'"),
+    ('scenes = ["hertz"]\nlevels = [0]\nstress_spaces = ["p1"]\n', "unknown stress space 'p1'"),
+    ('scenes = ["nowhere.toml"]\nlevels = [0]\n', "neither a built-in scene"),
+    ('scenes = ["hertz"]\nlevels = [0, 3]\nreference = { level = 3 }\n', "not finer"),
+    ('scenes = ["hertz"]\n', "levels must be"),
+    ('scenes = ["hertz"]\nlevels = [0]\ntriangulations = ["type3"]\n', "unknown triangulation"),
+])
+def test_bad_spec_one_line(tmp_path, capsys, text, words):
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises(StudyError, match=words):
+        load_spec(p)
+    assert main(["study", "run", str(p), "--cache", "", "--quiet", "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("cvxdual: error: study spec") and words in err[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_study_help(capsys):
+    for argv in (["study", "-h"], ["study", "run", "-h"], ["study", "convergence", "-h"]):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert "--scheduler ADDRESS" in out and "--memory-limit" in out and "convergence" in out
+
+
+def test_cache_rejects_tampered_entries(tmp_path):
+    c = Cache(tmp_path)
+    row = {"scene": "x", "error_l2_rel": 0.1, "nan": float("nan")}
+    assert c.put_row("k1", row)["nan"] is None
+    assert c.get_row("k1") == {"scene": "x", "error_l2_rel": 0.1, "nan": None}
+    assert c.get_row("k1", ("missing",)) is None
+    p = tmp_path / "rows" / "k1.json"
+    d = json.loads(p.read_text())
+    d["row"]["error_l2_rel"] = 0.2  # checksum no longer matches
+    p.write_text(json.dumps(d))
+    assert c.get_row("k1") is None
+    (tmp_path / "rows" / "k2.json").write_text(p.read_text().replace('"k1"', '"k2"'))  # someone else's entry
+    assert c.get_row("k2") is None
+    p.write_text("{not json")
+    assert c.get_row("k1") is None
+    a = np.arange(12.0).reshape(4, 3)
+    c.put_arrays("a1", stress=a)
+    assert np.array_equal(c.get_arrays("a1", {"stress": (4, 3)})["stress"], a)
+    assert c.get_arrays("a1", {"stress": (5, 3)}) is None  # the wrong shape for its mesh
+    c.put_arrays("a2", stress=np.array([[np.nan, 0.0, 0.0]]))
+    assert c.get_arrays("a2") is None  # not finite
+    f = tmp_path / "arrays" / "a1.npz"
+    raw = bytearray(f.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    f.write_bytes(bytes(raw))
+    assert c.get_arrays("a1") is None  # corrupt: recomputed, never a traceback
+    assert Cache(None).get_row("k1") is None
+
+
+@pytest.fixture(scope="module")
+def client():
+    import dask
+    from distributed import Client, LocalCluster
+    with dask.config.set(local_config()):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="2GB",
+                               dashboard_address=None, silence_logs=50)
+    cl = Client(cluster)
+    yield cl
+    cl.close()
+    cluster.close()
+
+
+def test_stability_quick(client, tmp_path):
+    df = run("stability", tmp_path, quick=True, client=client, cache=None, quiet=True)
+    assert set(df.solver) == {"CLARABEL", "fast"} and set(df.triangulation) == {"type1", "type2"}
+    solved = df[df.status == "optimal"]
+    assert solved.paths_agree_l2_rel.max() < 1e-5 and solved.within_tolerances.all()
+    nu = solved[solved.case.str.startswith("nu") & (solved.solver == "fast") & (solved.triangulation == "type1")]
+    err = dict(zip(nu.case, nu.error_l2_rel, strict=True))
+    assert err["nu = 0.4999"] > 10 * err["nu = 0.3"]  # locking is shown, not hidden
+    units = solved[solved.group == "physical units"]
+    assert set(units.units) == {"m, Pa"} and np.allclose(units.error_l2_rel, err["nu = 0.3"], rtol=1e-8)
+    text = (tmp_path / "stability.md").read_text()
+    assert "## What the table says" in text and "## stiffness contrast" in text
+
+
+def test_convergence_spec_small(client, tmp_path):
+    """The built-in convergence spec (its hooks and report) on a subset: hertz against the exact
+    field, the groove against a finer reference."""
+    import tomllib
+
+    from cvxdual.study.spec import BUILTIN_SPECS
+    raw = tomllib.loads((BUILTIN_SPECS / "convergence.toml").read_text())
+    raw["hooks"] = str(BUILTIN_SPECS / raw["hooks"])
+    raw["scenes"] = [{"source": "hertz", "reference": "exact", "levels": [0, 1, 2]},
+                     {"source": "cylinder-in-groove", "reference": {"level": 3}, "levels": [0, 1]}]
+    df = run(raw, tmp_path, client=client, cache=tmp_path / "cache", quiet=True)
+    assert (df.status == "optimal").all() and len(df) == 10
+    from cvxdual.study import rates
+    r = rates(df).set_index(["scene", "triangulation"])["rate_l2"]
+    assert 0.5 <= r["hertz", "type1"] <= 1.1 and r["hertz", "type1"] == pytest.approx(r["hertz", "type2"])
+    assert r["cylinder-in-groove", "type2"] > r["cylinder-in-groove", "type1"] + 0.1
+    for _, g in df.groupby(["scene", "triangulation"]):
+        assert np.all(np.diff(g.sort_values("level")["error_l2_rel"]) < 0)
+    hertz = df[df.scene == "hertz"]
+    assert hertz.edge_error_share.notna().all() and hertz.reference.eq("exact").all()
+    assert df[df.scene != "hertz"].reference.eq("type2 level 3").all()
+    text = (tmp_path / "convergence.md").read_text()
+    assert "## What the rates say" in text and "type 2 beats type 1" in text and "estimated relative error" in text
+    csv = pd.read_csv(tmp_path / "convergence.csv")
+    assert {"rate", "error_l2_rel_finer_rule", "worker", "cached"} <= set(csv.columns)
+
+
+def test_speed_limit_rows(client, tmp_path):
+    """The speed study's pseudo-solver ``limit`` (one factorisation) next to a solve, in processes."""
+    import cvxdual.fast
+    if not hasattr(cvxdual.fast, "limit"):
+        pytest.skip("cvxdual.fast.limit is not there yet")
+    spec = {"name": "lim", "scenes": ["hertz"], "levels": [1], "overrides": {"mesh": {"columns": 4}},
+            "cases": [{"solvers": ["limit"], "isolate": "process"}, {"solvers": ["fast"]}]}
+    df = run(spec, None, client=client, cache=None, quiet=True).set_index("solver")
+    assert (df.status == "optimal").all()
+    assert df.loc["limit", "n_dofs"] > 0 and df.loc["limit", "t_limit"] > 0 and df.loc["limit", "peak_mb"] > 50
+    assert df.loc["limit", "n_pieces"] == df.loc["fast", "n_pieces"]
