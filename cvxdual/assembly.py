@@ -38,6 +38,11 @@ class Scales:
     def displacement(self) -> float:
         return self.stress * self.length / self.modulus
 
+    @property
+    def energy(self) -> float:
+        """Energy per unit thickness: ``stress^2 length^2 / modulus``."""
+        return self.stress**2 * self.length**2 / self.modulus
+
 
 @dataclass(frozen=True)
 class System:

@@ -317,7 +317,8 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
                                   else np.einsum("sqi,sij,sqj->sq", d, M, d))))
     ref0 = sq(ref)
     e_s, e_u = sq(sh - ref, A), sq(ref - ce[:, None, :], A)
-    return {"l2_rel": float(np.sqrt(sq(sh - ref) / ref0)), "stress_A": float(np.sqrt(e_s)),
+    return {"l2": float(np.sqrt(sq(sh - ref))), "l2_rel": float(np.sqrt(sq(sh - ref) / ref0)),
+            "stress_A": float(np.sqrt(e_s)),
             "displacement_a": float(np.sqrt(e_u)), "combined": float(np.sqrt(e_s + e_u)),
             "reference_A": float(np.sqrt(sq(ref, A))),
             "l2_rel_displacement": float(np.sqrt(sq(ref - ce[:, None, :]) / ref0))}

@@ -28,8 +28,10 @@ def human_summary(sol, written=()) -> str:
         f"solve {t['solve']:.2f}, recover {t['recover']:.2f})",
         f"contact: {c['n_active']} active pairs, x in [{_fmt(c['x_min'])}, {_fmt(c['x_max'])}] {L}, "
         f"max pressure {_fmt(c['max_pressure'])} {S}, total force {_fmt(c['total_force'])} {S}*{L}",
-        f"residuals: equilibrium {r['equilibrium']:.1e}, constitutive {r['constitutive']:.1e}, "
-        f"complementarity {r['complementarity']:.1e}; duality gap {s['duality_gap']:.1e}",
+        (f"residuals: equilibrium {r['equilibrium']:.1e}, constitutive {r['constitutive']:.1e}, "
+         f"complementarity {r['complementarity']:.1e}; duality gap {s['duality_gap']:.1e}" if "complementarity" in r
+         else f"residuals: admissibility {r['admissibility']:.1e} (exact to rounding), penetration "
+         f"{r['penetration']:.1e}; relative gap G {s['duality_gap']:.1e}"),
     ]
     if s["exact"] and s["exact"].get("kind") == "hertz":
         e = s["exact"]
@@ -38,6 +40,11 @@ def human_summary(sol, written=()) -> str:
         e = s["error"]
         lines.append(f"error against the exact stress: L2 {e['l2']:.3e} (relative {e['l2_rel']:.2e}), "
                      f"energy relative {e['energy_rel']:.2e}")
+    if s["bounds"]:
+        b = s["bounds"]
+        lines.append(f"certified bounds: {b['energy_lower']:.6g} <= J(u) <= {b['energy_upper']:.6g}; "
+                     f"error bound sqrt(2G) = {b['error_bound']:.3g}"
+                     + ("" if b["guaranteed"] else f" (not guaranteed: {'; '.join(b['reasons'])})"))
     if written:
         lines.append(f"wrote {Path(written[0]).parent}/: " + ", ".join(Path(w).name for w in written))
     return "\n".join(lines)
@@ -63,7 +70,7 @@ def _cmd_solve(args) -> int:
     out = None if args.no_output else Path(args.out or Path("out") / scene.name)
     if out is not None:
         check_writable(out)  # fail before the work, and create nothing until there are results
-    sol = solve(scene, args.triangulation, args.level, solver)
+    sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds)
     written = write_outputs(sol, out, plots=not args.no_plots) if out is not None else []
     print(human_summary(sol, written))
     return 0
@@ -88,6 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "(Hlavacek-Krizek) (default: type1)")
     s.add_argument("--level", type=int, default=None, help="mesh level, h halves per level (default: the scene's)")
     s.add_argument("--solver", default="CLARABEL", help="CVXPY solver name (default: CLARABEL)")
+    s.add_argument("--stress-space", default="p0", choices=("p0", "eq"),
+                   help="p0: the paper's piecewise-constant stresses; eq: exactly admissible equilibrium "
+                   "stresses with certified bounds, flat faces only (default: p0)")
+    s.add_argument("--bounds", action="store_true", help="with p0: also certify the displacement against "
+                   "equilibrium stresses (flat faces only)")
     s.add_argument("--out", default=None, help="output directory (default: out/<scene>)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.grading=4 (repeatable)")

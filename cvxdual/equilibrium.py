@@ -24,12 +24,13 @@ Stress parameter vector ``y`` (physical units): ``sigma = S y + sigma0`` on the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
+from .assembly import Scales
 from .errors import MeshError, SceneError, SolverError, UnbalancedLoadError
 from .mesh import Mesh, build_mesh
 from .quadrature import gauss01
@@ -137,21 +138,9 @@ def local_basis(X: np.ndarray, ng: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Scales:
-    """Length ``L``, stiffness ``E`` and stress ``s`` of the nondimensional QP."""
-
-    length: float
-    modulus: float
-    stress: float
-
-    @property
-    def energy(self) -> float:
-        return self.stress**2 * self.length**2 / self.modulus
-
-
-@dataclass
 class EquilibriumSpace:
-    """The JM stress space of a flat-face mesh and its admissibility data (physical units).
+    """The JM stress space of a flat-face mesh and its admissibility data (physical units);
+    built complete by :meth:`from_mesh` and never changed afterwards.
 
     Geometry: ``X (n_T, 3, 2)`` macro triangles, ``body (n_T,)``, ``basis (n_T, 27, 15)``.
     Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) = ``Tm y + z_fix``;
@@ -175,7 +164,7 @@ class EquilibriumSpace:
     contact_x: np.ndarray
     traction_edges: dict
     scales: Scales
-    load_imbalance: float = 0.0
+    load_imbalance: float
 
     @classmethod
     def from_mesh(cls, mesh: Mesh) -> "EquilibriumSpace":
@@ -417,10 +406,10 @@ def build_space(mesh: Mesh) -> EquilibriumSpace:
     space = EquilibriumSpace(mesh=mesh, X=X, body=body, basis=basis, edges=edges,
                              P=vertex_map(basis, edges, len(kind)), Tm=Tm, z_fix=z_fix, kind=kind,
                              div=div, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],
-                             traction_edges=cl["traction"], scales=Scales(1.0, 1.0, 1.0))
-    balance_loads(space)
-    space.scales = make_scales(space)
-    return space
+                             traction_edges=cl["traction"], scales=Scales(1.0, 1.0, 1.0), load_imbalance=0.0)
+    z_fix, imbalance = balance_loads(space)
+    space = replace(space, z_fix=z_fix, load_imbalance=imbalance)
+    return replace(space, scales=make_scales(space))
 
 
 # -- rigid motions and load balance -------------------------------------------------------
@@ -518,21 +507,23 @@ def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.nd
     return W, terms.sum(0), np.abs(terms).sum(0)
 
 
-def balance_loads(space: EquilibriumSpace) -> None:
-    """Check the data on the floating modes and remove a rounding-level imbalance from the
-    loaded fixed parameters (least-norm change); record the relative imbalance."""
+def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
+    """Check the data on the floating modes; return the fixed parameters with a rounding-level
+    imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
     r = rigid_modes(space.mesh, joint=True)
     if r.shape[2] == 0:
-        return
+        return space.z_fix, 0.0
     W, bf, bf_abs = work_rows(space, r)
     sigma0 = space.sigma0
     work = W @ sigma0 + bf
-    space.load_imbalance = floating_load_check(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
+    imbalance = floating_load_check(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
     loaded = np.flatnonzero(space.z_fix != 0)
     if len(loaded) == 0:
-        return
+        return space.z_fix, imbalance
     G = (sp.csr_matrix(W) @ space.P)[:, loaded].toarray()
-    space.z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
+    z_fix = space.z_fix.copy()
+    z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
+    return z_fix, imbalance
 
 
 def make_scales(space: EquilibriumSpace) -> Scales:

@@ -54,9 +54,35 @@ def contact_table(sol):
                          "force": c["force"]})
 
 
+def _write_eq_vtu(sol, path) -> None:
+    """Equilibrium stresses: every sub-triangle a cell with its own vertices (discontinuous),
+    point data the linear stresses, so equilibrium can be checked from the file alone."""
+    import meshio
+    P = sol.space.sub_points().reshape(-1, 2)
+    s = sol.stress.reshape(-1, 3)
+    n_sub = len(P) // 3
+    tri = sol.mesh.triangles()
+    v = sol.displacement
+    centre = v[tri].mean(axis=1)
+    # P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid)
+    disp = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(centre[:, None], (len(tri), 3, 2))],
+                    axis=2).reshape(-1, 2)
+    cell = {"body": [np.repeat(sol.space.body, 3).astype(np.int32)]}
+    if sol.bounds is not None:
+        cell["bound_contribution"] = [sol.bounds["contributions"]["sub"].ravel()]
+    point = {"s11": s[:, 0], "s22": s[:, 1], "s12": s[:, 2], "stress": s,
+             "displacement": np.c_[disp, np.zeros(len(disp))]}
+    mesh = meshio.Mesh(np.c_[P, np.zeros(len(P))], [("triangle", np.arange(3 * n_sub).reshape(n_sub, 3))],
+                       point_data=point, cell_data=cell)
+    meshio.write(path, mesh, file_format="vtu")
+
+
 def write_vtu(sol, path: str | Path) -> None:
     """Straight pieces as ``triangle`` cells on the mesh vertices; curved pieces as ``polygon``
-    cells (extra points along the face, displacement interpolated from the nearest vertex)."""
+    cells (extra points along the face, displacement interpolated from the nearest vertex).
+    Equilibrium stresses: see :func:`_write_eq_vtu`."""
+    if sol.stress_space == "eq":
+        return _write_eq_vtu(sol, path)
     import meshio
     p = sol.system.pieces
     pts = sol.mesh.points
@@ -78,9 +104,11 @@ def write_vtu(sol, path: str | Path) -> None:
         kind.append(p.kind[ids].astype(np.int32))
     P = np.concatenate(points)
     D = np.concatenate(pdisp)
-    mesh = meshio.Mesh(np.c_[P, np.zeros(len(P))], cells,
-                       point_data={"displacement": np.c_[D, np.zeros(len(D))]},
-                       cell_data={"stress": stress, "piece_kind": kind})
+    cell = {"stress": stress, "piece_kind": kind}
+    if sol.bounds is not None:  # flat faces only: the pieces are the mesh triangles, in order
+        cell["bound_contribution"] = [sol.bounds["contributions"]["element"][tri]]
+    mesh = meshio.Mesh(np.c_[P, np.zeros(len(P))], cells, point_data={"displacement": np.c_[D, np.zeros(len(D))]},
+                       cell_data=cell)
     meshio.write(path, mesh, file_format="vtu")
 
 
@@ -95,12 +123,20 @@ def figures(sol) -> dict:
     stress = Figure(figsize=(12.0, 1.0 + 6.0 * aspect * 0.85), layout="constrained")
     for ax, comp in zip(stress.subplots(1, 2), ("s22", "shear"), strict=True):
         plot_stress(sol, comp, ax=ax)
-    stress.suptitle(f"{sol.scene.name}, {sol.triangulation}, level {sol.level}: {sol.system.n_pieces} pieces")
+    n = sol.summary()["n_pieces"]
+    what = f"stress space eq: {n} sub-triangles" if sol.stress_space == "eq" else f"{sol.triangulation}: {n} pieces"
+    stress.suptitle(f"{sol.scene.name}, level {sol.level}, {what}")
     deformed = Figure(figsize=(6.0, 1.0 + 6.0 * aspect * 0.85), layout="constrained")
     plot_deformed(sol, ax=deformed.add_subplot())
     pressure = Figure(figsize=(8, 4.5), layout="constrained")
     plot_pressure(sol, ax=pressure.add_subplot())
-    return {"stress.png": stress, "deformed.png": deformed, "pressure.png": pressure}
+    out = {"stress.png": stress, "deformed.png": deformed, "pressure.png": pressure}
+    if sol.bounds is not None:
+        from .plots import plot_bound_map
+        bounds = Figure(figsize=(8.0, 1.0 + 8.0 * aspect * 0.85), layout="constrained")
+        plot_bound_map(sol, ax=bounds.add_subplot())
+        out["bounds.png"] = bounds
+    return out
 
 
 def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
@@ -115,7 +151,7 @@ def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
         "solution.vtu": lambda p: write_vtu(sol, p),
     }
     if plots:
-        for name, fig in figures(sol).items():
+        for name, fig in figures(sol).items():  # noqa: B007 - fig is bound in the lambda
             writers[name] = lambda p, fig=fig: fig.savefig(p, dpi=130, format="png")
     staged: list[tuple[Path, Path]] = []
     try:

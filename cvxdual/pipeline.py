@@ -21,7 +21,7 @@ from .solution import Solution, check_solution, evaluate
 from .solvers import FAST, resolve_solver
 from .triangulation import check_triangulation, discretize
 
-STRESS_SPACES = ("p0",)  # the paper's piecewise-constant stresses on the pieces
+STRESS_SPACES = ("p0", "eq")  # the paper's piecewise-constant stresses; equilibrium (docs/equilibrium.md)
 
 
 def check_stress_space(name) -> str:
@@ -54,11 +54,15 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None):
 
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
-          check: bool = True, warm_start: bool = True, stress_space: str = "p0", **solver_options) -> Solution:
+          check: bool = True, warm_start: bool = True, stress_space: str = "p0", bounds: bool = False,
+          **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
     :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
+    ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
+    stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
+    certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
     ``check`` false returns solutions that fail the accuracy checks (for studies of them).
     """
     scene = as_scene(scene)
@@ -66,6 +70,11 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     triangulation = check_triangulation(triangulation)
     stress_space = check_stress_space(stress_space)
     level = scene.mesh.default_level if level is None else level
+    if stress_space == "eq":
+        return _solve_eq(scene, level, solver, check, **solver_options)
+    if bounds:
+        from .equilibrium import check_flat
+        check_flat(scene)
     t0 = time.perf_counter()
     mesh, pieces, ties = discretize(scene, triangulation, level)
     t1 = time.perf_counter()
@@ -95,6 +104,12 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
         t, u = model.stresses(), model.displacements()
     t4 = time.perf_counter()
     fields = evaluate(system, t, u, info)
+    if bounds:
+        from .equilibrium import EquilibriumSpace
+        space = EquilibriumSpace.from_mesh(mesh)
+        sigma, _ = solve_eq(space, FAST if solver == FAST else "CLARABEL")
+        fields["bounds"] = certify(space, sigma, fields["displacement"])
+        fields["space"] = space
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
                "recover": t5 - t4, "total": t5 - t0}
@@ -126,5 +141,94 @@ def recover(model, triangulation: str, level: int, info: dict, check: bool = Tru
     fields = evaluate(model.system, model.stresses(), model.displacements(), info)
     sol = Solution(triangulation=triangulation, stress_space=stress_space, level=int(level), timings={}, **fields)
     if check and not model.extra:
+        check_solution(sol)
+    return sol
+
+
+# -- the equilibrium stress space (docs/equilibrium.md) -----------------------------------
+
+def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray) -> dict:
+    """Contact quantities of equilibrium stresses at the pairs: the nodal force
+    ``int p phi_k dx`` of the linear contact pressure of each edge, pressure per tributary
+    length, the gap and the relative displacement of ``v``."""
+    from .bounds import contact_tractions
+    from .solution import ACTIVE_TOL
+    p = -contact_tractions(space, sigma)  # (n_c, 2) at both ends of each contact edge
+    d = np.diff(system.mesh.pair_x)
+    force = np.zeros(len(d) + 1)
+    force[:-1] += d * (2 * p[:, 0] + p[:, 1]) / 6.0
+    force[1:] += d * (p[:, 0] + 2 * p[:, 1]) / 6.0
+    up, lo = system.mesh.pairs.T
+    rel = v[lo, 1] - v[up, 1]
+    pressure = force / system.width
+    active = force > ACTIVE_TOL * max(float(force.max(initial=0.0)), 1e-300)
+    xs = system.mesh.pair_x[active]
+    return {"x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel, "force": force,
+            "pressure": pressure, "active": active, "edge_pressure": p, "n_active": int(active.sum()),
+            "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
+            "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
+
+
+def solve_eq(space, solver: str, **solver_options) -> tuple[np.ndarray, dict]:
+    """Exactly admissible vertex stresses ``(n_sub, 3, 3)`` on ``space`` and solver statistics."""
+    if solver == FAST:
+        from .eqfast import solve_eq_fast
+        y, info = solve_eq_fast(space)
+        return space.stresses(y), info
+    from .equilibrium import EquilibriumModel
+    model = EquilibriumModel(space)
+    info = model.solve(solver, **solver_options)
+    return model.stresses(), info
+
+
+def certify(space, sigma: np.ndarray, u: np.ndarray) -> dict:
+    """Certified two-sided bounds of ``sigma`` with the P1 displacement ``u`` made pointwise
+    admissible (:func:`cvxdual.bounds.certified_bounds`)."""
+    from .bounds import certified_bounds
+    return certified_bounds(space, sigma, u)
+
+
+def _solve_eq(scene: Scene, level: int, solver: str, check: bool, **solver_options) -> Solution:
+    """The "eq" run: the P1 displacement from the fast path, the equilibrium stresses on the
+    same mesh, the certified bounds between them and the errors against an exact field."""
+    from .bounds import contact_slack, exact_errors, residuals
+    from .equilibrium import EquilibriumSpace, check_flat
+    from .exact import exact_field
+    from .fast import solve_fast
+    check_flat(scene)
+    t0 = time.perf_counter()
+    system = build_system(scene, "type1", level)
+    t1 = time.perf_counter()
+    u, _ = solve_fast(system, warm_start_active(scene, "type1", level, system.mesh.pair_x))
+    t2 = time.perf_counter()
+    space = EquilibriumSpace.from_mesh(system.mesh)
+    t3 = time.perf_counter()
+    sigma, info = solve_eq(space, solver, **solver_options)
+    t4 = time.perf_counter()
+    b = certify(space, sigma, u.reshape(-1, 2))
+    v = b["displacement"]
+    res = residuals(space, sigma)
+    sc = space.scales
+    delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
+    _, smin, _ = contact_slack(space, v)
+    res = {"admissibility": max(res.values()), **res,
+           "penetration": float(max(0.0, -smin.min(initial=0.0)) / delta)}
+    exact = exact_field(scene)
+    error = None
+    if exact is not None:
+        e = exact_errors(space, sigma, v, exact)
+        error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
+                 "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
+                 "displacement_energy": e["displacement_a"], "effectivity": b["error_bound"] / e["combined"]}
+    t5 = time.perf_counter()
+    energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
+    sol = Solution(scene=scene, triangulation="type1", stress_space="eq", level=int(level), system=system,
+                   stress=sigma, displacement=v, solver=info,
+                   timings={"mesh": t1 - t0, "displacement": t2 - t1, "assemble": t3 - t2, "build": 0.0,
+                            "solve": t4 - t3, "recover": t5 - t4, "total": t5 - t0},
+                   objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res,
+                   contact=eq_contact(space, system, sigma, v),
+                   exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)
+    if check:
         check_solution(sol)
     return sol

@@ -74,14 +74,26 @@ STRESS_COMPONENTS = {
 }
 
 
+def _sub_triangulation(sol):
+    """The sub-triangles of an equilibrium solution, each with its own three vertices."""
+    from matplotlib.tri import Triangulation
+    P = sol.space.sub_points().reshape(-1, 2)
+    return Triangulation(P[:, 0], P[:, 1], np.arange(len(P)).reshape(-1, 3))
+
+
 def plot_stress(sol, component: str = "s22", ax=None, colorbar: bool = True, cmap: str = "viridis"):
-    """One stress component (``s11``, ``s22``, ``s12`` or ``shear``) per piece, on the bodies' outlines."""
+    """One stress component (``s11``, ``s22``, ``s12`` or ``shear``) on the bodies' outlines:
+    constant per piece (``p0``) or linear on every sub-triangle (``eq``)."""
     ax = _axes(ax)
     L, S = sol.scene.units
     fn, title = STRESS_COMPONENTS[component]
-    val = fn(sol.stress)
-    pc = _add_polys(ax, _polys(sol), val, cmap=cmap, norm=Normalize(val.min(), val.max()),
-                    edgecolors="face", linewidths=0.1)
+    if sol.stress_space == "eq":
+        val = fn(sol.stress.reshape(-1, 3))
+        pc = ax.tripcolor(_sub_triangulation(sol), val, shading="gouraud", cmap=cmap)
+    else:
+        val = fn(sol.stress)
+        pc = _add_polys(ax, _polys(sol), val, cmap=cmap, norm=Normalize(val.min(), val.max()),
+                        edgecolors="face", linewidths=0.1)
     _outlines(ax, sol, colors="k", linewidths=0.5)
     ax.autoscale_view()
     ax.set_aspect("equal")
@@ -136,4 +148,30 @@ def plot_pressure(sol, ax=None):
     ax.set_title(f"{sol.scene.name}: {c['n_active']} active pairs of {len(c['x'])}")
     ax.legend()
     ax.grid(alpha=0.3)
+    return ax
+
+
+def plot_bound_map(sol, ax=None, colorbar: bool = True):
+    """Where the certified bound comes from: the contribution of every sub-triangle to ``G``
+    per unit area (``1/2 |sigma - C e(v)|_A^2``), log scale, and the contact term per edge."""
+    from matplotlib.colors import LogNorm
+    ax = _axes(ax)
+    L, S = sol.scene.units
+    b = sol.bounds
+    P = sol.space.sub_points()
+    d = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    area = 0.5 * np.abs(d[0][:, 0] * d[1][:, 1] - d[0][:, 1] * d[1][:, 0])
+    dens = b["contributions"]["sub"].ravel() / area
+    floor = max(float(dens.max()) * 1e-8, 1e-300)
+    pc = PolyCollection(P, array=np.maximum(dens, floor), cmap="inferno",
+                        norm=LogNorm(floor, max(float(dens.max()), 10 * floor)), edgecolors="face", linewidths=0.0)
+    ax.add_collection(pc)
+    _outlines(ax, sol, colors="w", linewidths=0.5)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"x [{L}]")
+    ax.set_title(f"G = {b['gap']:.3g} (contact edges {float(b['contributions']['contact'].sum()):.3g}); "
+                 f"bound sqrt(2G) = {b['error_bound']:.3g}", fontsize=9)
+    if colorbar:
+        ax.figure.colorbar(pc, ax=ax, shrink=0.8, label=f"contribution to G per unit area [{S}]")
     return ax

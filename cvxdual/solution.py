@@ -25,6 +25,11 @@ from .scene import Scene
 TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5, "penetration": 1e-6,
               "duality_gap": 1e-6}
 
+# equilibrium stresses (stress space "eq") are exactly admissible: every constraint to rounding
+# relative to the stress scale (the exactness post-step brings them to ~1e-14)
+EQ_TOLERANCES = {"admissibility": 1e-9, "penetration": 1e-12}
+BOUND_KEYS = ("energy_upper", "energy_lower", "gap", "error_bound", "guaranteed", "reasons", "data_oscillation")
+
 ACTIVE_TOL = 1e-6  # an active pair's force exceeds this fraction of the largest (and its opening)
 FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
 
@@ -37,7 +42,9 @@ def load_scale(system: System) -> float:
 @dataclass(frozen=True)
 class Solution:
     """A solved scene, built complete by :func:`cvxdual.solve` and never changed afterwards.
-    Arrays: ``stress`` ``(n_pieces, 3)``, ``displacement`` ``(n_nodes, 2)``, contact arrays
+    Arrays: ``stress`` ``(n_pieces, 3)`` (stress space ``p0``) or the Voigt values at the
+    vertices of every sub-triangle ``(n_sub, 3, 3)`` (``eq``), ``displacement`` ``(n_nodes, 2)``
+    (for ``eq`` the P1 displacement of the bounds, pointwise admissible), contact arrays
     ``(n_pairs,)`` ordered by ``x``; ``timings`` in seconds per phase."""
 
     scene: Scene
@@ -55,6 +62,8 @@ class Solution:
     contact: dict
     exact: dict | None
     error: dict | None
+    bounds: dict | None = None  # certified bounds (docs/equilibrium.md), where computed
+    space: object | None = None  # the EquilibriumSpace of an "eq" solution or of the bounds
 
     @property
     def mesh(self):
@@ -68,15 +77,16 @@ class Solution:
         """The ``summary.json`` contract (README, "Outputs")."""
         s = self.system
         c = self.contact
+        eq = self.stress_space == "eq"
         return {
             "scene": self.scene.name,
             "triangulation": self.triangulation,
             "stress_space": self.stress_space,
             "level": self.level,
             "units": {"length": self.scene.units[0], "stress": self.scene.units[1]},
-            "n_pieces": s.n_pieces,
-            "piece_kinds": s.pieces.counts(),
-            "n_stress_unknowns": 3 * s.n_pieces,
+            "n_pieces": 3 * self.space.n_tri if eq else s.n_pieces,
+            "piece_kinds": {"sub_triangle": 3 * self.space.n_tri} if eq else s.pieces.counts(),
+            "n_stress_unknowns": self.space.n_y if eq else 3 * s.n_pieces,
             "n_dofs": s.n_dofs,
             "n_free_dofs": s.n_r,
             "n_contact_pairs": len(s.jb),
@@ -92,6 +102,7 @@ class Solution:
             "contact": {k: c[k] for k in ("n_active", "x_min", "x_max", "max_pressure", "total_force")},
             "exact": self.exact,
             "error": self.error,
+            "bounds": None if self.bounds is None else {k: self.bounds[k] for k in BOUND_KEYS},
             "timings": dict(self.timings),
         }
 
@@ -202,9 +213,10 @@ def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict) -> dict:
 
 
 def check_solution(sol: Solution) -> None:
-    bad = {k: v for k, v in sol.residuals.items() if v > TOLERANCES[k]}
+    tol = EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
+    bad = {k: v for k, v in sol.residuals.items() if k in tol and v > tol[k]}
     if bad:
-        txt = ", ".join(f"{k} {v:.2e} > {TOLERANCES[k]:.0e}" for k, v in bad.items())
+        txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
         name = str(sol.solver.get("solver"))
         advice = ("try --solver fast, or a coarser mesh" if name.upper() == "CLARABEL"
                   else "report it: the active-set result should be exact" if name == "fast"

@@ -1,9 +1,9 @@
 """Running a study on Dask: a local cluster of worker processes, or any running scheduler.
 
-Each case runs in a worker process with a memory limit (one thread per worker). The
-scheduler's allowed failures are set to 0, so a worker killed for exceeding its memory limit
-turns its case into a failed row (``status = "killed: ..."``) instead of a retry on the next
-worker. The client writes every finished row to the cache as it arrives: killing the client
+Each case runs in a worker process with a memory limit (one thread per worker, one case per
+thread at a time). A case on a worker that dies is rerun once elsewhere; if it kills a second
+worker (it exceeds the memory limit itself) it becomes a failed row (``status = "killed: ..."``)
+and the study goes on. The client writes every finished row to the cache as it arrives: killing the client
 loses only the cases that were running, and a rerun reuses every cached row (``cached`` is
 true in those rows). Finer-level references are computed once per scene variant, before the
 cases that need them, and passed between workers through the cache directory: with a remote
@@ -172,10 +172,17 @@ def _client(client, scheduler, workers, memory_limit):
             cluster.close()
 
 
+# A worker that dies fails every case it holds; a case is blamed (a "killed" row) only when it is
+# on a second worker that dies, so the cases that merely shared a worker with it are rerun.
+ALLOWED_FAILURES = 1
+
+
 def local_config() -> dict:
-    """Dask settings of the local cluster: no retry of a case that killed its worker, no
-    pausing or spilling (a case's memory is the solver's, not Dask data)."""
-    return {"distributed.scheduler.allowed-failures": 0, "distributed.worker.memory.target": False,
+    """Dask settings of the local cluster: one case per worker thread at a time, a case that kills
+    two workers is not retried again, no pausing or spilling (a case's memory is the solver's,
+    not Dask data)."""
+    return {"distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+            "distributed.scheduler.worker-saturation": 1.0, "distributed.worker.memory.target": False,
             "distributed.worker.memory.spill": False, "distributed.worker.memory.pause": False,
             "distributed.worker.memory.terminate": 0.95}
 
@@ -189,7 +196,7 @@ def _cpus() -> int:
 
 
 def _set_no_retries(dask_scheduler=None):
-    dask_scheduler.allowed_failures = 0
+    dask_scheduler.allowed_failures = ALLOWED_FAILURES
 
 
 def _no_retries(client) -> None:
