@@ -76,7 +76,7 @@ def _cmd_solve(args) -> int:
     return 0
 
 
-STUDIES = ("convergence", "speed", "stability")  # built-in specs: cvxdual/study/specs/NAME.*
+STUDIES = ("convergence", "speed", "stability", "bounds")  # built-in specs: cvxdual/study/specs/NAME.*
 
 
 def _cmd_study(args) -> int:

@@ -210,16 +210,18 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
 
 def solution_fields(sol) -> dict:
     """The generic columns of a solved case."""
-    from ..solution import TOLERANCES
+    from ..solution import EQ_TOLERANCES, TOLERANCES
     c, t, res = sol.contact, sol.timings, sol.residuals
     active = np.asarray(c["active"]).astype(int)
+    summary = sol.summary()
+    tol = EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
     return {
-        "status": sol.solver.get("status"), "n_pieces": int(sol.system.n_pieces),
-        "n_stress_unknowns": 3 * int(sol.system.n_pieces), "n_dofs": int(sol.system.n_dofs),
+        "status": sol.solver.get("status"), "n_pieces": int(summary["n_pieces"]),
+        "n_stress_unknowns": int(summary["n_stress_unknowns"]), "n_dofs": int(sol.system.n_dofs),
         "h": float(sol.mesh.h), "h_min": float(sol.mesh.h_min), "h_ratio": float(sol.mesh.h_min / sol.mesh.h),
         "iterations": sol.solver.get("iterations"), "duality_gap": float(sol.duality_gap),
         **{f"res_{k}": float(v) for k, v in res.items()},
-        "within_tolerances": bool(all(res.get(k, np.inf) <= v for k, v in TOLERANCES.items())),
+        "within_tolerances": bool(all(res.get(k, np.inf) <= v for k, v in tol.items())),
         "n_active": int(c["n_active"]), "contact_x_min": c["x_min"], "contact_x_max": c["x_max"],
         "peak_pressure": c["max_pressure"], "total_force": c["total_force"],
         "n_patches": int(np.sum(np.diff(np.r_[0, active]) == 1)),

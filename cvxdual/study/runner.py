@@ -36,7 +36,7 @@ from .cases import (
     run_case,
     scene_of,
 )
-from .spec import Study, StudyError, load_spec
+from .spec import Study, StudyError, load_module, load_spec
 
 DEFAULT_CACHE = ".cache/cvxdual"
 DEFAULT_MEMORY = "4GB"
@@ -76,7 +76,9 @@ def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, wo
 
 
 def _hooks_hash(study: Study) -> str:
-    if not study.hooks_path:
+    """A hash of the hooks file when it can change rows (it has ``measure``); a report-only hook
+    changes no row, so editing it keeps the cache."""
+    if not study.hooks_path or getattr(load_module(Path(study.hooks_path)), "measure", None) is None:
         return ""
     return hashlib.sha256(Path(study.hooks_path).read_bytes()).hexdigest()[:16]
 

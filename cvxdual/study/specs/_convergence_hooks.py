@@ -54,8 +54,10 @@ def report(df: pd.DataFrame, study, out) -> str:
             f"type 1, rate {r2:.2f} against {r1:.2f}, finest errors {e2:.3g} against {e1:.3g}. Why: on a "
             "non-convex stretch type 1 uses curved triangles on which `v_h` is constant along y, so their "
             "strain has no `e22` and their stress `s22` enters no admissibility condition; the complementary "
-            "energy then sets it to nearly zero (the stress map shows the band), although the true `s22` there is "
-            "about minus the contact pressure. That band is one element layer thick: an `O(h^1/2)` L2 error. "
+            "energy then sets it from `s11` and `s12` alone (`s22 = -(A21 s11 + A23 s12) / A22`, i.e. "
+            "`nu / (1 - nu) s11` for an isotropic body in plane strain), not from the contact pressure, although "
+            "the true `s22` there is about minus the contact pressure. That band is one element layer thick: "
+            "an `O(h^1/2)` L2 error. "
             "Type 2 moves the contact nodes onto a tangent polygon and confines the same defect to the sliver "
             "`D_h` between polygon and arc, of thickness `O(h^2)`, so its error converges like the rest.")
     if "wavy" in scenes:
