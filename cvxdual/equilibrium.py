@@ -577,7 +577,7 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 8) 
     ``dy = B^T (B B^T + mu I)^-1 r`` (one sparse factorisation). ``B`` has dependent rows
     (one per rigid motion of a body); they are consistent after :func:`balance_contact`, and
     the ``mu`` term only moves the multipliers along them, which ``B^T`` annihilates."""
-    from scipy.sparse.linalg import splu
+    from .factor import SPDFactor
     ci = space.contact_y.ravel()
     rest = np.setdiff1d(np.arange(space.n_y), ci)
     B = (space.div @ space.stress_map).tocsc()
@@ -585,7 +585,8 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 8) 
     rhs = space.div_rhs - space.div @ space.sigma0 - B[:, ci] @ y[ci]
     BB = (Br @ Br.T).tocsc()
     mu = 1e-10 * float(BB.diagonal().max())
-    lu = splu((BB + mu * sp.identity(BB.shape[0], format="csc")).tocsc())
+    # SPD (mu > 0): Cholesky through Pardiso where available, 10x SuperLU's LU at level 4
+    lu = SPDFactor((BB + mu * sp.identity(BB.shape[0], format="csr")).tocsr())
     y = y.copy()
     x = y[rest]
     tol = 1e-15 * max(float(np.abs(rhs).max()), space.scales.stress)
@@ -596,6 +597,7 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 8) 
             break
         x = x + Br.T @ lu.solve(r)
         done += 1
+    lu.close()
     y[rest] = x
     return y, done
 

@@ -107,7 +107,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     if bounds:
         from .equilibrium import EquilibriumSpace
         space = EquilibriumSpace.from_mesh(mesh)
-        sigma, _ = solve_eq(space, FAST if solver == FAST else "CLARABEL")
+        sigma, _ = solve_eq(space, FAST if solver == FAST else "CLARABEL", (mesh.pair_x, fields["contact"]["active"]))
         fields["bounds"] = certify(space, sigma, fields["displacement"])
         fields["space"] = space
     t5 = time.perf_counter()
@@ -169,11 +169,14 @@ def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray) -> dict:
             "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
 
 
-def solve_eq(space, solver: str, **solver_options) -> tuple[np.ndarray, dict]:
-    """Exactly admissible vertex stresses ``(n_sub, 3, 3)`` on ``space`` and solver statistics."""
+def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -> tuple[np.ndarray, dict]:
+    """Exactly admissible vertex stresses ``(n_sub, 3, 3)`` on ``space`` and solver statistics.
+    The fast path starts from the active contact ``pairs = (x, active)`` of a P0 solve on the
+    same mesh (one iteration when the P0 contact zone is right, a few more where P0 locks)."""
     if solver == FAST:
-        from .eqfast import solve_eq_fast
-        y, info = solve_eq_fast(space)
+        from .eqfast import active_from_pairs, solve_eq_fast
+        start = None if pairs is None else active_from_pairs(space, *pairs)
+        y, info = solve_eq_fast(space, start)
         return space.stresses(y), info
     from .equilibrium import EquilibriumModel
     model = EquilibriumModel(space)
@@ -199,11 +202,11 @@ def _solve_eq(scene: Scene, level: int, solver: str, check: bool, **solver_optio
     t0 = time.perf_counter()
     system = build_system(scene, "type1", level)
     t1 = time.perf_counter()
-    u, _ = solve_fast(system, warm_start_active(scene, "type1", level, system.mesh.pair_x))
+    u, p0_info = solve_fast(system, warm_start_active(scene, "type1", level, system.mesh.pair_x))
     t2 = time.perf_counter()
     space = EquilibriumSpace.from_mesh(system.mesh)
     t3 = time.perf_counter()
-    sigma, info = solve_eq(space, solver, **solver_options)
+    sigma, info = solve_eq(space, solver, (system.mesh.pair_x, p0_info["active"]), **solver_options)
     t4 = time.perf_counter()
     b = certify(space, sigma, u.reshape(-1, 2))
     v = b["displacement"]
