@@ -27,13 +27,10 @@ def in_part(part, points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     return (c >= lo - tol) & (c <= hi + tol)
 
 
-def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
-    """Index of every dof in ``r`` (``-1`` if fixed); tied nodes share their master's index.
-
-    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces).
-    """
-    n_dofs = 2 * mesh.n_nodes
-    fixed = np.zeros(n_dofs, bool)
+def supported(mesh: Mesh) -> np.ndarray:
+    """``(n_nodes, 2)``: the displacement components the supports fix (clamped: both; sliding:
+    ``u_x`` on a vertical side, ``u_y`` on a horizontal one)."""
+    fixed = np.zeros((mesh.n_nodes, 2), bool)
     for bm in mesh.bodies:
         for part in bm.body.boundary:
             if part.kind == "traction":
@@ -41,11 +38,19 @@ def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
             nodes = bm.side_nodes(part.on)
             nodes = nodes[in_part(part, mesh.points, nodes)]
             if part.kind == "clamped":
-                fixed[2 * nodes] = fixed[2 * nodes + 1] = True
-            elif part.on in ("left", "right"):
-                fixed[2 * nodes] = True  # sliding on a vertical side: u_x = 0
+                fixed[nodes] = True
             else:
-                fixed[2 * nodes + 1] = True  # sliding on a horizontal side: u_y = 0
+                fixed[nodes, 0 if part.on in ("left", "right") else 1] = True
+    return fixed
+
+
+def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
+    """Index of every dof in ``r`` (``-1`` if fixed); tied nodes share their master's index.
+
+    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces).
+    """
+    n_dofs = 2 * mesh.n_nodes
+    fixed = supported(mesh).ravel()  # dof 2k is u_x of node k, 2k+1 its u_y
     master = np.arange(n_dofs)
     if ties is not None and len(ties):
         s, m = np.asarray(ties).T

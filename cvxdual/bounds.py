@@ -19,20 +19,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .equilibrium import (
-    CONTACT,
-    FIXED,
-    MASS0,
-    N_GAUSS,
-    EquilibriumSpace,
-    bary_gradients,
-    frame_rows,
-    internal_rows,
-    outward_normals,
-    sub_vertices,
-    support_mask,
-)
+from .boundary import supported
+from .equilibrium import CONTACT, FIXED, N_GAUSS, EquilibriumSpace, outward_normals
 from .errors import SceneError
+from .jm import MASS0, bary_gradients, frame_rows, internal_rows, sub_vertices
 from .quadrature import gauss01, triangle_rule
 
 ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"
@@ -153,7 +143,7 @@ def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.
     shift = np.zeros(len(space.mesh.pairs))
     shift[:-1] = need
     shift[1:] = np.maximum(shift[1:], need)
-    fixed = support_mask(space.mesh)
+    fixed = supported(space.mesh)
     up, lo = space.mesh.pairs.T
     on_lower = ~fixed[lo, 1]
     if np.any((shift > 0) & fixed[lo, 1] & fixed[up, 1]):

@@ -29,9 +29,10 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .equilibrium import MASS0, EquilibriumSpace, bary_gradients, divergence_rows, make_exact, rigid_modes, sub_vertices
+from .equilibrium import EquilibriumSpace, make_exact, rigid_modes
 from .errors import SolverError
 from .factor import SPDFactor, backend
+from .jm import MASS0, bary_gradients, divergence_rows, sub_vertices
 
 MAX_ITER = 50
 CHUNK = 16384  # triangles per batched local inversion: bounds the temporaries (21 x 21 each)

@@ -31,110 +31,25 @@ import numpy as np
 import scipy.sparse as sp
 
 from .assembly import Scales
-from .errors import MeshError, SceneError, SolverError, UnbalancedLoadError
+from .boundary import supported
+from .errors import CvxdualError, MeshError, SceneError, SolverError, UnbalancedLoadError
+from .jm import (
+    MASS0,
+    bary_gradients,
+    divergence_rows,
+    local_basis,
+    sub_vertices,
+    traction_rows,
+    unit,
+)
 from .mesh import Mesh, build_mesh
 from .quadrature import gauss01
+from .rigid import candidates
 from .scene import Scene
 
-MASS0 = (np.ones((3, 3)) + np.eye(3)) / 12.0  # int phi_a phi_b / |T| for P1 on a triangle
 BALANCE_TOL = 1e-6  # relative load work on a floating rigid motion above this is a modelling error
 N_GAUSS = 10  # per edge: tractions and gap products (degree 19; exact for the built-in data)
 FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
-
-
-def traction_rows(n: np.ndarray) -> np.ndarray:
-    """``(..., 2, 3)``: ``sigma n`` in terms of Voigt ``(s11, s22, s12)``."""
-    z = np.zeros(n.shape[:-1])
-    return np.stack([np.stack([n[..., 0], z, n[..., 1]], -1), np.stack([z, n[..., 1], n[..., 0]], -1)], -2)
-
-
-def frame_rows(n: np.ndarray) -> np.ndarray:
-    """``(..., 2, 3)``: ``(sigma n).n`` and ``(sigma n).t`` with ``t = (-n2, n1)``."""
-    t = np.stack([-n[..., 1], n[..., 0]], -1)
-    T = traction_rows(n)
-    return np.stack([np.einsum("...i,...ij->...j", n, T), np.einsum("...i,...ij->...j", t, T)], -2)
-
-
-def sub_vertices(X: np.ndarray) -> np.ndarray:
-    """``(n_T, 3, 3, 2)``: vertices ``(X_i, X_{i+1}, c)`` of the sub-triangles of macro triangles ``X``."""
-    c = np.broadcast_to(X.mean(1, keepdims=True), X.shape)
-    return np.stack([X, np.roll(X, -1, axis=1), c], axis=2)
-
-
-def bary_gradients(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients ``(..., 3, 2)`` of the barycentric functions and areas of triangles ``p (..., 3, 2)``."""
-    d1, d2 = p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]
-    a2 = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
-    g1 = np.stack([d2[..., 1], -d2[..., 0]], -1) / a2[..., None]
-    g2 = np.stack([-d1[..., 1], d1[..., 0]], -1) / a2[..., None]
-    return np.stack([-g1 - g2, g1, g2], -2), 0.5 * a2
-
-
-def _unit(d: np.ndarray) -> np.ndarray:
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def internal_rows(X: np.ndarray) -> np.ndarray:
-    """``(n_T, 12, 27)``: jumps of ``sigma n`` across the internal edge ``(X_{i+1}, c)`` of
-    sub-triangles ``i`` and ``i+1``, at both edge ends (vertex ``a = 1, 2`` of ``T_i``,
-    ``a = 0, 2`` of ``T_{i+1}``)."""
-    n_T = len(X)
-    c = X.mean(1)
-    rows = np.zeros((n_T, 3, 2, 2, 27))
-    for i in range(3):  # three fixed local edges; everything inside is vectorised over triangles
-        d = c - X[:, (i + 1) % 3]
-        T = traction_rows(_unit(np.stack([d[:, 1], -d[:, 0]], -1)))  # (n_T, 2, 3)
-        j = (i + 1) % 3
-        for end, (a_i, a_j) in enumerate(((1, 0), (2, 2))):
-            rows[:, i, end, :, 9 * i + 3 * a_i: 9 * i + 3 * a_i + 3] = T
-            rows[:, i, end, :, 9 * j + 3 * a_j: 9 * j + 3 * a_j + 3] -= T
-    return rows.reshape(n_T, 12, 27)
-
-
-def edge_dof_rows(ng: np.ndarray) -> np.ndarray:
-    """``(n_T, 12, 27)``: the JM edge dofs ``(sigma n_g).n_g``, ``(sigma n_g).t_g`` at the local
-    ends ``X_j`` (vertex 0 of ``T_j``) and ``X_{j+1}`` (vertex 1) of macro edge ``j``; row
-    ``4 j + 2 e + k``. ``ng (n_T, 3, 2)`` are the global edge normals."""
-    n_T = len(ng)
-    rows = np.zeros((n_T, 3, 2, 2, 27))
-    R = frame_rows(ng)  # (n_T, 3, 2, 3)
-    for j in range(3):
-        for e in range(2):
-            rows[:, j, e, :, 9 * j + 3 * e: 9 * j + 3 * e + 3] = R[:, j]
-    return rows.reshape(n_T, 12, 27)
-
-
-def divergence_rows(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(n_T, 6, 27)`` rows of ``h_T div sigma`` on each sub-triangle (row ``2 i + k``), the
-    sub-triangle areas ``(n_T, 3)`` and ``h_T`` (longest edge). Scaling by ``h_T`` makes the rows
-    O(1) per unit stress."""
-    g, area = bary_gradients(sub_vertices(X))  # (n_T, 3, 3, 2)
-    h = np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2).max(1)
-    rows = np.zeros((len(X), 3, 2, 3, 3))  # sub i, component k, vertex a, Voigt
-    rows[:, :, 0, :, 0] = g[..., 0]  # d s11/dx
-    rows[:, :, 0, :, 2] = g[..., 1]  # d s12/dy
-    rows[:, :, 1, :, 2] = g[..., 0]  # d s12/dx
-    rows[:, :, 1, :, 1] = g[..., 1]  # d s22/dy
-    rows = rows.reshape(len(X), 3, 2, 9) * h[:, None, None, None]
-    full = np.zeros((len(X), 3, 2, 27))
-    for i in range(3):
-        full[:, i, :, 9 * i: 9 * i + 9] = rows[:, i]
-    return full.reshape(len(X), 6, 27), area, h
-
-
-def local_basis(X: np.ndarray, ng: np.ndarray) -> np.ndarray:
-    """``(n_T, 27, 15)``: vertex values of the 12 edge-dof basis stresses (columns 0-11, dual to
-    :func:`edge_dof_rows` and free of internal jumps) and of 3 bubbles (zero internal jumps and
-    zero edge dofs). One batched SVD of the stacked ``(24, 27)`` conditions; it must have full
-    rank 24 (then the local space has exactly 15 = 27 - 12 dimensions)."""
-    M = np.concatenate([internal_rows(X), edge_dof_rows(ng)], axis=1)
-    U, s, Vt = np.linalg.svd(M)
-    if np.any(s[:, -1] < 1e-10 * s[:, 0]):
-        raise MeshError("a macro triangle gives a singular Johnson-Mercier basis (degenerate triangle)")
-    pinv = np.einsum("tki,tk,tjk->tij", Vt[:, :24], 1.0 / s, U)  # (n_T, 27, 24)
-    N = np.concatenate([pinv[:, :, 12:], Vt[:, 24:].transpose(0, 2, 1)], axis=2)
-    target = np.concatenate([np.zeros((12, 15)), np.eye(12, 15)])
-    return N + pinv @ (target[None] - M @ N)  # one step of refinement: conditions hold to ~1e-16
 
 
 @dataclass(frozen=True)
@@ -258,7 +173,7 @@ def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
     uniq, inv, count = np.unique(keys.ravel(), return_inverse=True, return_counts=True)
     lo, hi = uniq // n_nodes, uniq % n_nodes
     d = pts[hi] - pts[lo]
-    ng = _unit(np.stack([d[:, 1], -d[:, 0]], 1))
+    ng = unit(np.stack([d[:, 1], -d[:, 0]], 1))
     bnd = np.flatnonzero(count == 1)
     owner = np.full((len(uniq), 2), -1)
     owner[inv, 0], owner[inv, 1] = np.repeat(np.arange(len(tri)), 3), np.tile(np.arange(3), len(tri))
@@ -414,41 +329,13 @@ def build_space(mesh: Mesh) -> EquilibriumSpace:
 
 # -- rigid motions and load balance -------------------------------------------------------
 
-def support_mask(mesh: Mesh) -> np.ndarray:
-    """``(n_nodes, 2)``: displacement components fixed by supports (clamped: both; sliding:
-    ``u_x`` on left/right, ``u_y`` on far/face), on the nodes of each support's interval."""
-    fixed = np.zeros((mesh.n_nodes, 2), bool)
-    edges = None
-    for k, bm in enumerate(mesh.bodies):
-        for part in bm.body.boundary:
-            if part.kind == "traction":
-                continue
-            if edges is None:
-                edges = mesh_edges(mesh.triangles(), mesh.points, mesh.n_nodes)
-            _, nodes = part_edges(mesh, edges, k, part)
-            if part.kind == "clamped":
-                fixed[nodes] = True
-            else:
-                fixed[nodes, 0 if part.on in ("left", "right") else 1] = True
-    return fixed
-
-
 def node_body(mesh: Mesh) -> np.ndarray:
     return np.concatenate([np.full(bm.n_nodes, k) for k, bm in enumerate(mesh.bodies)])
 
 
 def rigid_candidates(mesh: Mesh) -> np.ndarray:
-    """``(n_nodes, 2, 6)``: translations and rotation (about the body's centre, scaled by the
-    length scale so all columns are O(1)) of each body, zero on the other body."""
-    pts, L = mesh.points, mesh.scene.length_scale
-    nb = node_body(mesh)
-    R = np.zeros((mesh.n_nodes, 2, 6))
-    for k in range(2):
-        m = nb == k
-        c = pts[m].mean(0)
-        R[m, 0, 3 * k], R[m, 1, 3 * k + 1] = 1.0, 1.0
-        R[m, 0, 3 * k + 2], R[m, 1, 3 * k + 2] = -(pts[m, 1] - c[1]) / L, (pts[m, 0] - c[0]) / L
-    return R
+    """``(n_nodes, 2, 6)``: translations and rotation of each body (:func:`cvxdual.rigid.candidates`)."""
+    return candidates(mesh).reshape(mesh.n_nodes, 2, 6)
 
 
 def _null(rows: np.ndarray, n: int) -> np.ndarray:
@@ -464,7 +351,7 @@ def rigid_modes(mesh: Mesh, joint: bool) -> np.ndarray:
     together keeping ``[r_y] = 0`` on the contact pairs (the floating modes, on which the loads
     must balance); otherwise of each body alone (with its contact tractions held fixed)."""
     R = rigid_candidates(mesh)
-    fixed = support_mask(mesh)
+    fixed = supported(mesh)
     rows = R[fixed]  # (n_fixed, 6)
     if joint:
         up, lo = mesh.pairs.T
@@ -670,5 +557,5 @@ class EquilibriumModel:
     def stresses(self) -> np.ndarray:
         """``(n_sub, 3, 3)`` exact-admissible vertex stresses (after :meth:`solve`)."""
         if self.y_exact is None:
-            raise RuntimeError("solve the model first")
+            raise CvxdualError("the equilibrium model has no solution yet: call solve() first")
         return self.space.stresses(self.y_exact)

@@ -37,7 +37,7 @@ class RigidModes:
     load_imbalance: float
 
 
-def _candidates(mesh) -> np.ndarray:
+def candidates(mesh) -> np.ndarray:
     """The three rigid motions of each body ``(n_dofs, 6)``: rotations about the body's centre,
     scaled by the length scale so that all columns are O(1)."""
     L = mesh.scene.length_scale
@@ -59,7 +59,7 @@ def rigid_modes(mesh, pieces, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, 
     A combination of the candidates is a motion of ``V_h`` if it respects fixed and tied dofs
     and strains no piece.
     """
-    cand = _candidates(mesh)
+    cand = candidates(mesh)
     n_dofs, n_r = len(rdof), int(rdof.max()) + 1
     free = np.flatnonzero(rdof >= 0)
     first = np.full(n_r, n_dofs)  # the master dof (first carrying each r index)

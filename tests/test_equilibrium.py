@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 import cvxdual as cd
+from cvxdual.boundary import supported
 from cvxdual.bounds import (
     admissible_displacement,
     certified_bounds,
@@ -18,17 +19,9 @@ from cvxdual.bounds import (
     residuals,
     vtu_cells,
 )
-from cvxdual.equilibrium import (
-    EquilibriumModel,
-    EquilibriumSpace,
-    divergence_rows,
-    edge_dof_rows,
-    internal_rows,
-    local_basis,
-    make_exact,
-    rigid_modes,
-)
+from cvxdual.equilibrium import EquilibriumModel, EquilibriumSpace, make_exact, rigid_modes
 from cvxdual.errors import SceneError
+from cvxdual.jm import divergence_rows, edge_dof_rows, internal_rows, local_basis
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision
 # times the O(10-100) terms of a row); 1e-12 leaves a margin of 10-100.
@@ -167,7 +160,7 @@ def test_displacement_made_pointwise_admissible():
     assert slack(u).min() < -1e-4  # the trap: the chord of a convex gap lies above it
     v, info = admissible_displacement(space, u)
     assert slack(v).min() >= 0 and contact_slack(space, v)[1].min() >= 0
-    fixed = cd.equilibrium.support_mask(space.mesh)
+    fixed = supported(space.mesh)
     assert np.array_equal(v[fixed], u[fixed])  # supports untouched: v stays in V
     assert info["max_shift"] == pytest.approx(-info["min_slack_before"], rel=1e-6)
 
