@@ -97,6 +97,16 @@ def _label(keys: tuple, names: list[str]) -> str:
     return ", ".join(str(v) for v in keys if str(v) != "") if names else ""
 
 
+def _plain_log_ticks(ax) -> None:
+    """Log axes labelled 1, 2, 5, 10, 20, ... in plain numbers: spans under a decade still get
+    labels, and minor labels never crowd into each other (as 3x10^0 4x10^0 did)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        axis.set_minor_formatter(NullFormatter())
+
+
 def plot_error(df: pd.DataFrame, x: str = "h", ax=None, scene: str | None = None, reference_error: float | None = None,
                xlabel: str | None = None):
     """Relative L2 error against ``x`` (``h`` or ``t_total``) for one scene, a line per series;
@@ -117,6 +127,7 @@ def plot_error(df: pd.DataFrame, x: str = "h", ax=None, scene: str | None = None
                   label=f"{_label(k, keys)} (rate {r:.2f})")
     if reference_error is not None and np.isfinite(reference_error) and reference_error > 0:
         ax.axhline(reference_error, color="gray", lw=0.8, ls=":", label="reference error (est.)")
+    _plain_log_ticks(ax)
     ax.set_title(scene or "")
     ax.set_xlabel(xlabel or {"h": "mesh size h (largest element)", "t_total": "wall time per solve [s]"}.get(x, x))
     ax.set_ylabel("relative L2 stress error")
