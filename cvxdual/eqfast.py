@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from .equilibrium import EquilibriumSpace, make_exact, rigid_modes
 from .errors import SolverError
 from .factor import SPDFactor, backend
+from .fast import transfer_active
 from .jm import MASS0, bary_gradients, divergence_rows, sub_vertices
 
 MAX_ITER = 50
@@ -101,10 +102,10 @@ def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
 def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray) -> np.ndarray:
     """Contact parameters ``(n_c, 2)`` in contact for an active set ``active`` given at abscissae
     ``x`` (the P0 fast path's pairs, or the ``contact_x`` of a coarser equilibrium solve):
-    interpolated, as :func:`cvxdual.fast.transfer_active` does between levels."""
-    x, a = np.asarray(x, float).ravel(), np.asarray(active, float).ravel()
+    :func:`cvxdual.fast.transfer_active` on the sorted points."""
+    x, a = np.asarray(x, float).ravel(), np.asarray(active, bool).ravel()
     order = np.argsort(x, kind="stable")
-    return np.interp(space.contact_x, x[order], a[order]) >= 0.5
+    return transfer_active(x[order], a[order], space.contact_x)
 
 
 class HybridSolver:
@@ -372,22 +373,3 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
             "pinned": hs.pins, "warm_start": "coarse level" if warm else "given", "warm_start_time": t_warm,
             **post}
     return y_exact, info
-
-
-class FastEquilibriumModel:
-    """Drop-in for :class:`EquilibriumModel` with the fast path: ``solve()`` returns the info
-    dict, then ``y_exact``, ``stresses()`` and ``info`` as there."""
-
-    def __init__(self, space: EquilibriumSpace):
-        self.space = space
-        self.y_exact: np.ndarray | None = None
-        self.info: dict = {}
-
-    def solve(self, active: np.ndarray | None = None) -> dict:
-        self.y_exact, self.info = solve_eq_fast(self.space, active)
-        return self.info
-
-    def stresses(self) -> np.ndarray:
-        if self.y_exact is None:
-            raise RuntimeError("solve the model first")
-        return self.space.stresses(self.y_exact)

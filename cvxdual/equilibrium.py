@@ -32,7 +32,7 @@ import scipy.sparse as sp
 
 from .assembly import Scales
 from .boundary import supported
-from .errors import CvxdualError, MeshError, SceneError, SolverError, UnbalancedLoadError
+from .errors import CvxdualError, MeshError, SceneError, SolverError
 from .jm import (
     MASS0,
     bary_gradients,
@@ -44,10 +44,10 @@ from .jm import (
 )
 from .mesh import Mesh, build_mesh
 from .quadrature import gauss01
-from .rigid import candidates
+from .rigid import candidates, check_balance
 from .scene import Scene
+from .sparse import assemble_blocks
 
-BALANCE_TOL = 1e-6  # relative load work on a floating rigid motion above this is a modelling error
 N_GAUSS = 10  # per edge: tractions and gap products (degree 19; exact for the built-in data)
 FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
 
@@ -128,12 +128,9 @@ class EquilibriumSpace:
         _, area = bary_gradients(sub_vertices(self.X))
         A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]  # (n_T, 3, 3)
         blk = area[:, :, None, None, None, None] * MASS0[None, None, :, None, :, None] * A[:, None, None, :, None, :]
-        blk = blk.reshape(3 * self.n_tri, 9, 9)
         idx = 9 * np.arange(3 * self.n_tri)[:, None] + np.arange(9)[None, :]
-        rows = np.broadcast_to(idx[:, :, None], blk.shape)
-        cols = np.broadcast_to(idx[:, None, :], blk.shape)
         n = 27 * self.n_tri
-        return sp.csr_matrix((blk.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
+        return assemble_blocks(idx, idx, blk.reshape(3 * self.n_tri, 9, 9), (n, n))
 
     def gap_weights(self) -> np.ndarray:
         """``(n_c, 2)``: ``int phi_e eps dx`` of the two end hats of each contact edge, so that
@@ -150,15 +147,6 @@ def check_flat(scene: Scene) -> None:
     if curved:
         raise SceneError(f"the equilibrium stress space needs flat faces, but body {curved[0]!r} has a curved "
                          "face; use the P0 dual (cvxdual.solve, type 1/2 pieces) or flat faces with a gap profile")
-
-
-def floating_load_check(work: np.ndarray, scale: np.ndarray) -> float:
-    rel = float(np.max(np.abs(work) / np.where(scale > 0, scale, 1.0))) if len(work) else 0.0
-    if rel > BALANCE_TOL:
-        raise UnbalancedLoadError(
-            f"the loads are unbalanced on {len(work)} rigid motion(s) that keep the bodies in contact "
-            f"(relative work {rel:.3g} > {BALANCE_TOL:g}): balance the loads or add a support")
-    return rel
 
 
 # -- building the space ------------------------------------------------------------------
@@ -283,9 +271,8 @@ def vertex_map(basis: np.ndarray, edges: dict, n_raw: int) -> sp.csr_matrix:
     edof = 4 * edges["id"][:, :, None, None] + 2 * e + np.arange(2)[None, None, None, :]
     dofmap = np.concatenate([edof.reshape(n_T, 12), 4 * len(edges["keys"]) + 3 * np.arange(n_T)[:, None]
                              + np.arange(3)[None, :]], axis=1)
-    rows = np.broadcast_to(27 * np.arange(n_T)[:, None, None] + np.arange(27)[None, :, None], basis.shape)
-    cols = np.broadcast_to(dofmap[:, None, :], basis.shape)
-    return sp.csr_matrix((basis.ravel(), (rows.ravel(), cols.ravel())), shape=(27 * n_T, n_raw))
+    rows = 27 * np.arange(n_T)[:, None] + np.arange(27)[None, :]
+    return assemble_blocks(rows, dofmap, basis, (27 * n_T, n_raw))
 
 
 def build_space(mesh: Mesh) -> EquilibriumSpace:
@@ -312,9 +299,8 @@ def build_space(mesh: Mesh) -> EquilibriumSpace:
     z_fix = np.where(kind == FIXED, cl["value"], 0.0)
     rows, _, h = divergence_rows(X)
     n_T = len(X)
-    r = np.broadcast_to(6 * np.arange(n_T)[:, None, None] + np.arange(6)[None, :, None], rows.shape)
-    c = np.broadcast_to(27 * np.arange(n_T)[:, None, None] + np.arange(27)[None, None, :], rows.shape)
-    div = sp.csr_matrix((rows.ravel(), (r.ravel(), c.ravel())), shape=(6 * n_T, 27 * n_T))
+    div = assemble_blocks(6 * np.arange(n_T)[:, None] + np.arange(6)[None, :],
+                          27 * np.arange(n_T)[:, None] + np.arange(27)[None, :], rows, (6 * n_T, 27 * n_T))
     F = np.array([b.body_force for b in scene.bodies])[body]
     div_rhs = -(h[:, None, None] * F[:, None, :]).repeat(3, axis=1).reshape(-1)
     contact_y = len(free) + np.arange(2 * n_c).reshape(n_c, 2)
@@ -403,7 +389,7 @@ def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
     W, bf, bf_abs = work_rows(space, r)
     sigma0 = space.sigma0
     work = W @ sigma0 + bf
-    imbalance = floating_load_check(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
+    imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
     loaded = np.flatnonzero(space.z_fix != 0)
     if len(loaded) == 0:
         return space.z_fix, imbalance
@@ -532,24 +518,17 @@ class EquilibriumModel:
         self.info: dict = {}
 
     def solve(self, solver: str = "CLARABEL", **options) -> dict:
-        """Solve, then apply :func:`make_exact`; returns an info dict (status, times, sizes)."""
+        """Solve (statuses mapped to :class:`SolverError` by :func:`cvxdual.solvers.solve_problem`),
+        then apply :func:`make_exact`; returns an info dict (status, times, sizes)."""
         import time
 
-        import cvxpy as cp
-        t0 = time.perf_counter()
-        try:
-            self.problem.solve(solver=solver, **options)
-        except cp.error.SolverError as e:
-            raise SolverError(f"{solver} failed on the equilibrium dual: {e}") from None
+        from .solvers import solve_problem
+        stats = solve_problem(self.problem, solver, "equilibrium dual", **options)
         t1 = time.perf_counter()
-        if self.problem.status not in ("optimal",) or self.y.value is None:
-            raise SolverError(f"{solver} returned status {self.problem.status!r} on the equilibrium dual; "
-                              "check that the loads can be carried by compressive contact")
         self.y_exact, post = make_exact(self.space, self.y.value * self.space.scales.stress)
         t2 = time.perf_counter()
-        st = self.problem.solver_stats
-        self.info = {"solver": solver, "status": self.problem.status, "iterations": st.num_iters,
-                     "solve_time": t1 - t0, "solver_time": st.solve_time, "post_time": t2 - t1,
+        self.info = {"solver": solver, "status": stats["status"], "iterations": stats["iterations"],
+                     "solve_time": stats["wall"], "solver_time": stats["solve_time"], "post_time": t2 - t1,
                      "n_variables": self.space.n_y, "n_equalities": self.constraints["equilibrium"].size,
                      "n_inequalities": self.constraints["contact"].size, **post}
         return self.info

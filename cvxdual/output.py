@@ -58,22 +58,22 @@ def _write_eq_vtu(sol, path) -> None:
     """Equilibrium stresses: every sub-triangle a cell with its own vertices (discontinuous),
     point data the linear stresses, so equilibrium can be checked from the file alone."""
     import meshio
-    P = sol.space.sub_points().reshape(-1, 2)
-    s = sol.stress.reshape(-1, 3)
-    n_sub = len(P) // 3
+
+    from .bounds import vtu_cells
+    c = vtu_cells(sol.space, sol.stress)
     tri = sol.mesh.triangles()
     v = sol.displacement
-    centre = v[tri].mean(axis=1)
-    # P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid)
-    disp = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(centre[:, None], (len(tri), 3, 2))],
-                    axis=2).reshape(-1, 2)
-    cell = {"body": [np.repeat(sol.space.body, 3).astype(np.int32)]}
+    # the P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid), in cell order
+    corner = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(v[tri].mean(axis=1)[:, None],
+                                                                            (len(tri), 3, 2))], axis=2)
+    s = c["point_stress"]
+    cell = {"body": [c["cell_body"].astype(np.int32)]}
     if sol.bounds is not None:
         cell["bound_contribution"] = [sol.bounds["contributions"]["sub"].ravel()]
     point = {"s11": s[:, 0], "s22": s[:, 1], "s12": s[:, 2], "stress": s,
-             "displacement": np.c_[disp, np.zeros(len(disp))]}
-    mesh = meshio.Mesh(np.c_[P, np.zeros(len(P))], [("triangle", np.arange(3 * n_sub).reshape(n_sub, 3))],
-                       point_data=point, cell_data=cell)
+             "displacement": np.c_[corner.reshape(-1, 2), np.zeros(len(s))]}
+    mesh = meshio.Mesh(np.c_[c["points"], np.zeros(len(s))], [("triangle", c["cells"])], point_data=point,
+                       cell_data=cell)
     meshio.write(path, mesh, file_format="vtu")
 
 

@@ -71,7 +71,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     stress_space = check_stress_space(stress_space)
     level = scene.mesh.default_level if level is None else level
     if stress_space == "eq":
-        return _solve_eq(scene, level, solver, check, **solver_options)
+        return _solve_eq(scene, triangulation, level, solver, check, **solver_options)
     if bounds:
         from .equilibrium import check_flat
         check_flat(scene)
@@ -107,8 +107,10 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     if bounds:
         from .equilibrium import EquilibriumSpace
         space = EquilibriumSpace.from_mesh(mesh)
-        sigma, _ = solve_eq(space, FAST if solver == FAST else "CLARABEL", (mesh.pair_x, fields["contact"]["active"]))
-        fields["bounds"] = certify(space, sigma, fields["displacement"])
+        # the equilibrium stresses by the fast route whatever the P0 solver (the same QP, exact)
+        sigma, _ = solve_eq(space, FAST, (mesh.pair_x, fields["contact"]["active"]))
+        from .bounds import certified_bounds
+        fields["bounds"] = certified_bounds(space, sigma, fields["displacement"])
         fields["space"] = space
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
@@ -134,12 +136,11 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
     return transfer_active(coarse_x, info["active"], pair_x)
 
 
-def recover(model, triangulation: str, level: int, info: dict, check: bool = True,
-            stress_space: str = "p0") -> Solution:
+def recover(model, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
     """The :class:`Solution` of a CVXPY model solved by the caller (``info`` from its ``solve``);
     the accuracy checks apply only if the user added no constraint."""
     fields = evaluate(model.system, model.stresses(), model.displacements(), info)
-    sol = Solution(triangulation=triangulation, stress_space=stress_space, level=int(level), timings={}, **fields)
+    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings={}, **fields)
     if check and not model.extra:
         check_solution(sol)
     return sol
@@ -147,23 +148,28 @@ def recover(model, triangulation: str, level: int, info: dict, check: bool = Tru
 
 # -- the equilibrium stress space (docs/equilibrium.md) -----------------------------------
 
-def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray) -> dict:
-    """Contact quantities of equilibrium stresses at the pairs: the nodal force
-    ``int p phi_k dx`` of the linear contact pressure of each edge, pressure per tributary
-    length, the gap and the relative displacement of ``v``."""
+def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray, blocks: dict) -> dict:
+    """Contact quantities of equilibrium stresses at the pairs, defined as for P0: the nodal
+    force ``int p phi_k dx`` of the linear contact pressure of each edge and the pressure per
+    tributary length; a pair is active where the pressure at the pair (from either adjacent
+    edge) is positive, beyond rounding of the load scale."""
     from .bounds import contact_tractions
-    from .solution import ACTIVE_TOL
-    p = -contact_tractions(space, sigma)  # (n_c, 2) at both ends of each contact edge
-    d = np.diff(system.mesh.pair_x)
-    force = np.zeros(len(d) + 1)
+    from .solution import ACTIVE_TOL, FORCE_FLOOR, load_scale
+    p = -contact_tractions(space, sigma, blocks)  # (n_c, 2) at both ends of each contact edge
+    x = system.mesh.pair_x
+    d = np.diff(x)
+    force = np.zeros(len(x))
     force[:-1] += d * (2 * p[:, 0] + p[:, 1]) / 6.0
     force[1:] += d * (p[:, 0] + 2 * p[:, 1]) / 6.0
+    at_pair = np.zeros(len(x))
+    at_pair[:-1] = p[:, 0]
+    at_pair[1:] = np.maximum(at_pair[1:], p[:, 1])
+    floor = FORCE_FLOOR * load_scale(system) / max(float(x[-1] - x[0]), 1e-300)
+    active = at_pair > ACTIVE_TOL * max(float(at_pair.max(initial=0.0)), floor)
     up, lo = system.mesh.pairs.T
-    rel = v[lo, 1] - v[up, 1]
     pressure = force / system.width
-    active = force > ACTIVE_TOL * max(float(force.max(initial=0.0)), 1e-300)
-    xs = system.mesh.pair_x[active]
-    return {"x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel, "force": force,
+    xs = x[active]
+    return {"x": x, "gap": system.eps, "relative_displacement": v[lo, 1] - v[up, 1], "force": force,
             "pressure": pressure, "active": active, "edge_pressure": p, "n_active": int(active.sum()),
             "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
             "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
@@ -184,33 +190,34 @@ def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -
     return model.stresses(), info
 
 
-def certify(space, sigma: np.ndarray, u: np.ndarray) -> dict:
-    """Certified two-sided bounds of ``sigma`` with the P1 displacement ``u`` made pointwise
-    admissible (:func:`cvxdual.bounds.certified_bounds`)."""
-    from .bounds import certified_bounds
-    return certified_bounds(space, sigma, u)
-
-
-def _solve_eq(scene: Scene, level: int, solver: str, check: bool, **solver_options) -> Solution:
+def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool,
+              **solver_options) -> Solution:
     """The "eq" run: the P1 displacement from the fast path, the equilibrium stresses on the
-    same mesh, the certified bounds between them and the errors against an exact field."""
-    from .bounds import contact_slack, exact_errors, residuals
+    same mesh, the certified bounds between them and the errors against an exact field.
+    (Flat faces: both triangulations are the same mesh.)"""
+    from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
     from .equilibrium import EquilibriumSpace, check_flat
     from .exact import exact_field
     from .fast import solve_fast
     check_flat(scene)
     t0 = time.perf_counter()
-    system = build_system(scene, "type1", level)
+    system = build_system(scene, triangulation, level)
     t1 = time.perf_counter()
-    u, p0_info = solve_fast(system, warm_start_active(scene, "type1", level, system.mesh.pair_x))
-    t2 = time.perf_counter()
     space = EquilibriumSpace.from_mesh(system.mesh)
+    t2 = time.perf_counter()
+    if not np.any(system.f) and np.all(system.eps >= 0):
+        # nothing acts: zero stresses and displacements are the solution (see solve())
+        u = np.zeros(system.n_dofs)
+        sigma = np.zeros((3 * space.n_tri, 3, 3))
+        info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
+    else:
+        u, p0_info = solve_fast(system, warm_start_active(scene, triangulation, level, system.mesh.pair_x))
+        sigma, info = solve_eq(space, solver, (system.mesh.pair_x, p0_info["active"]), **solver_options)
     t3 = time.perf_counter()
-    sigma, info = solve_eq(space, solver, (system.mesh.pair_x, p0_info["active"]), **solver_options)
-    t4 = time.perf_counter()
-    b = certify(space, sigma, u.reshape(-1, 2))
+    blocks = constraint_blocks(space)
+    b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
     v = b["displacement"]
-    res = residuals(space, sigma)
+    res = residuals(space, sigma, blocks)
     sc = space.scales
     delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
     _, smin, _ = contact_slack(space, v)
@@ -222,15 +229,16 @@ def _solve_eq(scene: Scene, level: int, solver: str, check: bool, **solver_optio
         e = exact_errors(space, sigma, v, exact)
         error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
                  "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
-                 "displacement_energy": e["displacement_a"], "effectivity": b["error_bound"] / e["combined"]}
-    t5 = time.perf_counter()
+                 "displacement_energy": e["displacement_a"],
+                 "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else float("nan")}
+    t4 = time.perf_counter()
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
-    sol = Solution(scene=scene, triangulation="type1", stress_space="eq", level=int(level), system=system,
+    sol = Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
                    stress=sigma, displacement=v, solver=info,
-                   timings={"mesh": t1 - t0, "displacement": t2 - t1, "assemble": t3 - t2, "build": 0.0,
-                            "solve": t4 - t3, "recover": t5 - t4, "total": t5 - t0},
+                   timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2,
+                            "recover": t4 - t3, "total": t4 - t0},
                    objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res,
-                   contact=eq_contact(space, system, sigma, v),
+                   contact=eq_contact(space, system, sigma, v, blocks),
                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)
     if check:
         check_solution(sol)

@@ -153,7 +153,8 @@ def plot_pressure(sol, ax=None):
 
 def plot_bound_map(sol, ax=None, colorbar: bool = True):
     """Where the certified bound comes from: the contribution of every sub-triangle to ``G``
-    per unit area (``1/2 |sigma - C e(v)|_A^2``), log scale, and the contact term per edge."""
+    per unit area (``1/2 |sigma - C e(v)|_A^2``), log scale; the contact edges' total is in
+    the title."""
     from matplotlib.colors import LogNorm
     ax = _axes(ax)
     L, S = sol.scene.units

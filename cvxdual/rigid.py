@@ -91,16 +91,22 @@ def rigid_modes(mesh, pieces, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, 
     return RigidModes(floating, separating, anchors, f, imbalance)
 
 
+def check_balance(work: np.ndarray, scale: np.ndarray) -> float:
+    """The loads' relative work on the floating motions (``work`` and its ``scale`` per motion);
+    raise :class:`UnbalancedLoadError` above :data:`BALANCE_TOL`."""
+    rel = float(np.max(np.abs(work) / np.where(scale > 0, scale, 1.0))) if len(work) else 0.0
+    if rel > BALANCE_TOL:
+        raise UnbalancedLoadError(
+            f"the loads are unbalanced on {len(work)} rigid motion(s) that keep the bodies in contact "
+            f"(relative work {rel:.3g} > {BALANCE_TOL:g}): balance the loads or add a support "
+            "(clamped or sliding) that removes the motion")
+    return rel
+
+
 def _balance(Q: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float]:
     """Remove the loads' small work on the floating motions ``Q`` ``(n_dofs, m)``."""
     work = Q.T @ f
-    scale = np.abs(Q).T @ np.abs(f)
-    rel = float(np.max(np.abs(work) / np.where(scale > 0, scale, 1.0)))
-    if rel > BALANCE_TOL:
-        raise UnbalancedLoadError(
-            f"the loads are unbalanced on {Q.shape[1]} rigid motion(s) that keep the bodies in contact "
-            f"(relative work {rel:.3g} > {BALANCE_TOL:g}): balance the loads or add a support "
-            "(clamped or sliding) that removes the motion")
+    rel = check_balance(work, np.abs(Q).T @ np.abs(f))
     loaded = f != 0
     if not np.any(loaded):
         return f, rel

@@ -97,7 +97,7 @@ class Solution:
             "iterations": self.solver.get("iterations"),
             "objective": self.objective,
             "duality_gap": self.duality_gap,
-            "load_imbalance": s.load_imbalance,
+            "load_imbalance": self.space.load_imbalance if eq else s.load_imbalance,
             "residuals": dict(self.residuals),
             "contact": {k: c[k] for k in ("n_active", "x_min", "x_max", "max_pressure", "total_force")},
             "exact": self.exact,

@@ -58,6 +58,10 @@ def solve_problem(problem: cp.Problem, solver: str, what: str, **options) -> dic
     except cp.error.SolverError as e:
         raise SolverError(f"{what}: solver {solver} failed ({str(e).splitlines()[0] if str(e) else 'no message'}); "
                           "try another solver (e.g. CLARABEL) or a coarser mesh") from None
+    except (TypeError, ValueError) as e:  # solvers reject unknown or ill-typed options this way
+        msg = " ".join(str(e).split())[:200]
+        raise SolverError(f"{what}: solver {solver} rejected the options {sorted(options)} ({msg}); "
+                          "check their names and types in the solver's documentation") from None
     wall = time.perf_counter() - t0
     status = problem.status
     if status != cp.OPTIMAL:

@@ -87,6 +87,7 @@ def test_local_cluster(clean_run, client):
         e = g.sort_values("level").error_l2_rel.to_numpy()
         assert (e[1:] < e[:-1]).all()
     written = pd.read_csv(d / "out" / "acceptance.csv")
+    # the CSV keeps 6 significant digits
     pd.testing.assert_frame_equal(_figures(written), _figures(df), check_dtype=False, rtol=1e-5)
     text = (d / "out" / "acceptance.md").read_text()
     assert "## Fitted rates" in text and "bodies.cylinder.material.nu=0.4" in text
@@ -143,7 +144,7 @@ def test_separate_scheduler_two_workers(scheduler, clean_run, tmp_path, capsys):
     assert "16 cases, 16 solved" in capsys.readouterr().out
     df = pd.read_csv(out / "acceptance.csv")
     assert df.worker.nunique() == 2 and (df.status == "optimal").all()
-    pd.testing.assert_frame_equal(_figures(df), _figures(clean_run[2]), check_dtype=False, rtol=1e-5)
+    pd.testing.assert_frame_equal(_figures(df), _figures(clean_run[2]), check_dtype=False, rtol=1e-5)  # 6 digits
 
 
 SLOW = """\
@@ -179,7 +180,7 @@ def test_resume_after_kill(client, clean_run, tmp_path):
     df = run(spec, tmp_path / "out", client=client, cache=cache, quiet=True)
     assert int(df.cached.sum()) == done and int((~df.cached).sum()) == 16 - done
     assert (df.slept == 0.25).all()
-    pd.testing.assert_frame_equal(_figures(df), _figures(clean_run[2]), check_dtype=False, rtol=1e-5)
+    pd.testing.assert_frame_equal(_figures(df), _figures(clean_run[2]), check_dtype=False, rtol=1e-5)  # 6 digits
 
 
 HOOKS = """\
@@ -217,6 +218,7 @@ def test_finer_reference_compare_and_failures(client, tmp_path):
     finally:
         os.chdir(cwd)
     paths = df[df.case == "paths"]
+    # Clarabel (gaps ~1e-8) against the exact active set: ~1e-7 measured, 6e-6 at worst in reports/stability.md
     assert (paths.status == "optimal").all() and paths.paths_agree_l2_rel.max() < 1e-5
     assert paths.reference.unique().tolist() == ["type2 level 3"]
     assert (paths.reference_error_est > 0).all() and (paths.error_l2_rel > paths.reference_error_est).all()

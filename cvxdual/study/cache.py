@@ -24,13 +24,20 @@ ARRAY_FORMAT = "cvxdual-study-arrays/1"
 
 
 def code_version() -> str:
-    """A hash of the package's numerical code (``cvxdual/*.py``): cached results are reused only
-    by the code that produced them."""
+    """A hash of the package's code (every ``cvxdual/**/*.py``, the study code included) and of
+    the versions of the libraries that compute the numbers: cached results are reused only by
+    the code and solvers that produced them."""
+    from importlib.metadata import PackageNotFoundError, version
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for f in sorted(root.glob("*.py")):
-        h.update(f.name.encode())
+    for f in sorted(root.rglob("*.py")):
+        h.update(str(f.relative_to(root)).encode())
         h.update(f.read_bytes())
+    for dist in ("numpy", "scipy", "cvxpy", "clarabel", "pypardiso"):
+        try:
+            h.update(f"{dist}=={version(dist)}".encode())
+        except PackageNotFoundError:
+            h.update(f"{dist} absent".encode())
     return h.hexdigest()[:16]
 
 

@@ -249,7 +249,7 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
             out["error_l2_rel_finer_rule"] = stress_error(sol.system, sol.stress, ex.stress,
                                                           m["check_rule"])["l2_rel"]
         out["reference_error_est"] = 0.0
-        if m["edge_share"] and getattr(ex, "hertz", None) is not None:
+        if m["edge_share"] and getattr(ex, "hertz", None) is not None and sol.stress_space == "p0":
             out["edge_error_share"] = edge_share(sol, ex, m["rule"])
     elif ref.kind == "finer":
         if ref_info is None:

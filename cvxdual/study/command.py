@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+
+from .runner import DEFAULT_CACHE, DEFAULT_MEMORY
 
 EPILOG = """examples:
   cvxdual study run my_study.toml --out out/my_study
@@ -19,10 +22,10 @@ def _options(p: argparse.ArgumentParser) -> None:
                    help="address of a running Dask scheduler (default: a local cluster of worker processes)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="worker processes of the local cluster (default: min(2, CPUs))")
-    p.add_argument("--memory-limit", default="4GB", metavar="SIZE",
-                   help="memory limit per local worker; a case exceeding it is a failed row (default: 4GB)")
-    p.add_argument("--cache", default=".cache/cvxdual", metavar="DIR",
-                   help="cache of finished cases, for resuming ('' to disable; default: .cache/cvxdual)")
+    p.add_argument("--memory-limit", default=DEFAULT_MEMORY, metavar="SIZE",
+                   help=f"memory limit per local worker; a case over it is a failed row (default: {DEFAULT_MEMORY})")
+    p.add_argument("--cache", default=DEFAULT_CACHE, metavar="DIR",
+                   help=f"cache of finished cases, for resuming ('' to disable; default: {DEFAULT_CACHE})")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--quick", action="store_true", help="the spec's quick variant (coarse levels)")
 
@@ -56,4 +59,8 @@ def main(args) -> int:
     cached = int(df["cached"].sum()) if "cached" in df else 0
     print(f"study {study.name}: {len(df)} cases, {int(ok.sum())} solved, {int((~ok).sum())} failed, "
           f"{cached} from the cache; wrote {out}/")
+    if len(df) and not ok.any():
+        print(f"cvxdual: error: study {study.name}: no case was solved; see the status column of "
+              f"{out / (study.name + '.csv')}", file=sys.stderr)
+        return 1
     return 0

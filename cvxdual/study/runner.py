@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..norms import VOIGT_WEIGHT
 from .cache import Cache
 from .cases import (
     REQUIRED,
@@ -41,7 +42,6 @@ from .spec import Study, StudyError, load_module, load_spec
 DEFAULT_CACHE = ".cache/cvxdual"
 DEFAULT_MEMORY = "4GB"
 CONNECT_TIMEOUT = "20s"
-VOIGT_WEIGHT = np.array([1.0, 1.0, 2.0])
 
 
 def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, workers: int | None = None,
@@ -285,7 +285,7 @@ def _result_row(f, case, cancelled_error) -> dict:
         return {**base_row(case), "status": "killed: cancelled (the scheduler lost the case)", "worker": ""}
     except Exception as e:  # noqa: BLE001 - e.g. the reference of this case failed
         msg = " ".join(str(e).split())
-        return {**base_row(case), "status": f"failed: reference: {type(e).__name__}: {msg}"[:300], "worker": "",
+        return {**base_row(case), "status": f"failed: {type(e).__name__}: {msg}"[:300], "worker": "",
                 "_transient": not isinstance(e, StudyError)}
 
 

@@ -26,8 +26,8 @@ A spec is a table (a TOML file, or the ``SPEC`` dict of a Python file) of
 - ``quick``: keys that replace the others under ``--quick`` (a block's own ``quick`` too;
   ``quick = false`` drops a block);
 - ``hooks`` (TOML only): a Python file with optional ``measure(case, solution) -> dict`` (extra
-  row fields, run on the worker) and ``report(df, study) -> str`` (markdown sections); a Python
-  spec defines them itself.
+  row fields, run on the worker) and ``report(df, study, out) -> str`` (markdown sections;
+  ``out`` the output directory, for plots); a Python spec defines them itself.
 """
 
 from __future__ import annotations
@@ -318,6 +318,9 @@ def load_spec(source, quick: bool = False) -> Study:
             raise StudyError("study spec: 'compare' takes two or more solvers, the last the reference, e.g. "
                              "compare = [\"CLARABEL\", \"fast\"]")
         compare = tuple(_solver(s) for s in compare)
+        if any(c.stress_space != "p0" for c in cases):
+            raise StudyError("study spec: 'compare' compares P0 stresses of two paths; it does not take "
+                             "stress_spaces = [\"eq\"]")
         cases = [c if c.solver not in compare else _with(c, save_stress=True) for c in cases]
     return Study(name=name, title=raw.get("title", name), description=raw.get("description", ""), cases=cases,
                  path=path, quick=quick, raw=raw, hooks_path=hooks_path, measure=measure,
@@ -416,6 +419,9 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             raise StudyError(f"study spec {w}: levels must be a list of integers >= 0, e.g. levels = [0, 1, 2]")
         levels = sorted(set(levels))
         ref = _reference(entry.get("reference", d.get("reference")), levels, w)
+        if "eq" in spaces and ref.kind == "finer":
+            raise StudyError(f"study spec {w}: stress space eq is measured against an exact field only "
+                             "(reference = \"exact\" or \"none\"), not a finer P0 level")
         sgrid = {**grid, **(entry.get("set") or {})}
         axes = [[(k, v) for v in _list(vals, f"set.{k}", w)] for k, vals in sgrid.items()]
         fixed = _fixed_overrides(d.get("overrides"), w)
@@ -424,7 +430,8 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             over = tuple(fixed) + tuple(combo)
             for tri, space, solver in itertools.product(tris, spaces, solvers):
                 for level in levels:
-                    check_rule = metrics["check"] == "all" or (metrics["check"] == "finest" and level == max(levels))
+                    check_rule = space == "p0" and (metrics["check"] == "all"
+                                                    or (metrics["check"] == "finest" and level == max(levels)))
                     out.append(Case(
                         study=study, name=str(d.get("name", "")), group=str(d.get("group", "")),
                         scene_source=src, scene=str(label or ""), overrides=over, units=units,

@@ -82,16 +82,13 @@ def measure(case, sol) -> dict:
     tags = dict(case.tags)
     if tags.get("part") != "scan" or case.solver != "fast":
         return {}
-    import json
     import tempfile
     from pathlib import Path
 
-    from cvxdual.files import atomic_path
-    from cvxdual.files import to_jsonable as clean
+    from cvxdual.files import write_json
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as d:
-        with atomic_path(Path(d) / "summary.json") as tmp:
-            Path(tmp).write_text(json.dumps(clean(sol.summary()), indent=2))
+        write_json(Path(d) / "summary.json", sol.summary())
     t = time.perf_counter() - t0
     return {"t_write": t, "t_end_to_end": sol.timings["total"] + t}
 
