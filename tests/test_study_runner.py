@@ -51,7 +51,7 @@ def client():
     from distributed import Client, LocalCluster
     with dask.config.set(local_config()):
         cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="1.5GB",
-                               dashboard_address=None, silence_logs=50)
+                               dashboard_address=":0", silence_logs=50)
     cl = Client(cluster)
     yield cl
     cl.close()

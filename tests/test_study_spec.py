@@ -94,7 +94,7 @@ def client():
     from distributed import Client, LocalCluster
     with dask.config.set(local_config()):
         cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="2GB",
-                               dashboard_address=None, silence_logs=50)
+                               dashboard_address=":0", silence_logs=50)
     cl = Client(cluster)
     yield cl
     cl.close()
@@ -153,3 +153,22 @@ def test_speed_limit_rows(client, tmp_path):
     assert (df.status == "optimal").all()
     assert df.loc["limit", "n_dofs"] > 0 and df.loc["limit", "t_limit"] > 0 and df.loc["limit", "peak_mb"] > 50
     assert df.loc["limit", "n_pieces"] == df.loc["fast", "n_pieces"]
+
+
+def test_bounds_spec_small(client, tmp_path):
+    """The built-in bounds spec on hertz level 1 at two Poisson ratios: eq beats p0, the bound
+    dominates the true error, and eq does not lock."""
+    from cvxdual.study.spec import BUILTIN_SPECS, load_module
+    spec = load_module(BUILTIN_SPECS / "bounds.py")
+    cases = [{**spec._block("hertz", sp, "fast", nu), "levels": [1]} for sp in ("p0", "eq") for nu in (0.3, 0.4999)]
+    raw = {**spec.SPEC, "cases": cases, "hooks": str(BUILTIN_SPECS / "bounds.py")}
+    df = run(raw, tmp_path, client=client, cache=None, quiet=True)
+    assert (df.status == "optimal").all() and len(df) == 4
+    eq = df[df.stress_space == "eq"].set_index(["nu", "level"])
+    p0 = df[df.stress_space == "p0"].set_index(["nu", "level"])
+    assert (eq.error_l2_rel < p0.error_l2_rel).all()
+    assert (eq.effectivity >= 1).all() and (eq.effectivity <= 1.3).all()  # the acceptance's tightness
+    # no locking: at nu = 0.4999 the eq error stays within 2x of nu = 0.3 (P0's grows ~50x)
+    assert (eq.loc[0.4999].error_l2_rel / eq.loc[0.3].error_l2_rel).max() < 2
+    text = (tmp_path / "bounds.md").read_text()
+    assert "## Findings" in text and (tmp_path / "bounds.png").stat().st_size > 10000

@@ -163,7 +163,7 @@ def _client(client, scheduler, workers, memory_limit):
     with dask.config.set(local_config()):
         try:
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=":0", silence_logs=logging.ERROR)  # any free port
         except ValueError as e:
             raise StudyError(f"cannot start a local Dask cluster ({e}); check --workers and --memory-limit "
                              "(e.g. 4GB)") from None
