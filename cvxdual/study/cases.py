@@ -301,6 +301,16 @@ def now() -> str:
 
 
 def peak_mb() -> float:
+    """This process's peak resident memory in MB. On Linux ``VmHWM`` of its own address space:
+    ``ru_maxrss`` also carries the parent's peak across ``exec`` (a worker that once held a
+    9 GB reference made every case it launched report 9 GB)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
