@@ -18,7 +18,6 @@ import pytest
 from cvxdual.cli import main
 from cvxdual.study import run
 from cvxdual.study.cases import REQUIRED
-from cvxdual.study.runner import local_config
 
 SCENE = """\
 name = "my_hertz"
@@ -45,17 +44,7 @@ FIGURES = ["error_l2_rel", "error_energy_rel", "n_pieces", "h"]
 ORDER = ["overrides", "triangulation", "level"]
 
 
-@pytest.fixture(scope="module")
-def client():
-    import dask
-    from distributed import Client, LocalCluster
-    with dask.config.set(local_config()):
-        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="1.5GB",
-                               dashboard_address=":0", silence_logs=50)
-    cl = Client(cluster)
-    yield cl
-    cl.close()
-    cluster.close()
+CLUSTER_MEMORY = "1.5GB"  # per worker (conftest.client); small enough for the out-of-memory case
 
 
 def _write_spec(d: Path, extra: str = "", name: str = "acceptance") -> Path:

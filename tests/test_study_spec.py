@@ -12,7 +12,6 @@ import pytest
 from cvxdual.cli import main
 from cvxdual.study import StudyError, builtin_specs, load_spec, run
 from cvxdual.study.cache import Cache
-from cvxdual.study.runner import local_config
 
 
 def test_spec_expands_grid(tmp_path):
@@ -88,17 +87,6 @@ def test_cache_rejects_tampered_entries(tmp_path):
     assert Cache(None).get_row("k1") is None
 
 
-@pytest.fixture(scope="module")
-def client():
-    import dask
-    from distributed import Client, LocalCluster
-    with dask.config.set(local_config()):
-        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, memory_limit="2GB",
-                               dashboard_address=":0", silence_logs=50)
-    cl = Client(cluster)
-    yield cl
-    cl.close()
-    cluster.close()
 
 
 def test_stability_quick(client, tmp_path):
