@@ -1,23 +1,33 @@
 """Writing results: ``summary.json``, ``contact.csv``, ``solution.vtu`` and plots, as one set.
 
-Files are staged beside their final names and renamed into place only when every one was
-written (see :func:`write_outputs`), through the helpers of :mod:`cvxdual.files`.
+The output directory holds one set and is replaced whole (:func:`write_outputs`): the set is
+written into a hidden staging directory beside it and swapped in atomically by
+:func:`cvxdual.files.replace_dir`, so it is always the previous set or the new one, never a mix,
+and files of an earlier set that the new one lacks (plots after ``--no-plots``) are gone.
+Because the directory is replaced, a directory holding anything else is refused
+(:func:`check_output_dir`), and so are the filesystem root, the current and the home directory.
 """
 
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
 
 from .errors import OutputError
-from .files import json_text, temp_beside
+from .files import json_text, replace_dir, staged_dir, temp_beside
 from .locate import nearest_node_values
 from .pieces import piece_outlines
 
+SET_FILES = ("summary.json", "contact.csv", "solution.vtu", "stress.png", "deformed.png", "pressure.png",
+             "bounds.png")
+# per-file temporaries of earlier versions (files.temp_beside), removed with the set they are in
+_OLD_TEMP = re.compile(r"\.(" + "|".join(re.escape(n) for n in (*SET_FILES, "probe")) + r")\.[^/]+\.tmp")
 
-def check_writable(out: str | Path) -> Path:
+
+def check_writable(out: str | Path, what: str = "output directory", option: str = "--out") -> Path:
     """Check, without creating anything, that directory ``out`` can be created and written."""
     out = Path(out)
     p = out
@@ -26,12 +36,57 @@ def check_writable(out: str | Path) -> Path:
             break
         p = p.parent
     if p.exists() and not p.is_dir():
-        raise OutputError(f"cannot write to output directory {str(out)!r}: {str(p)!r} is not a directory; "
-                          "choose another --out")
+        raise OutputError(f"cannot write to {what} {str(out)!r}: {str(p)!r} is not a directory; "
+                          f"choose another {option}")
     if not os.access(p, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write to output directory {str(out)!r}: {str(p)!r} is not writable; "
-                          "choose another --out")
+        raise OutputError(f"cannot write to {what} {str(out)!r}: {str(p)!r} is not writable; "
+                          f"choose another {option}")
     return out
+
+
+def foreign_entries(out: str | Path) -> list[str]:
+    """The entries of directory ``out`` that are not files of an output set (directories end in '/')."""
+    bad = []
+    for e in os.scandir(out):
+        if not ((e.name in SET_FILES or _OLD_TEMP.fullmatch(e.name)) and e.is_file(follow_symlinks=False)):
+            bad.append(e.name + ("/" if e.is_dir(follow_symlinks=False) else ""))
+    return sorted(bad)
+
+
+def _check_owned(out: Path, shown: str) -> None:
+    bad = foreign_entries(out)
+    if bad:
+        short = [repr(b if len(b) <= 30 else b[:27] + "...") for b in bad[:3]]
+        more = f" and {len(bad) - 3} more" if len(bad) > 3 else ""
+        raise OutputError(f"refusing to write outputs to {shown!r}: it holds {', '.join(short)}{more}, not written "
+                          "by cvxdual, and the output directory is replaced whole; nothing was changed there; "
+                          "choose an empty or cvxdual-written --out")
+
+
+def check_output_dir(out: str | Path) -> Path:
+    """Check, creating nothing, that ``out`` can take an output set (:func:`write_outputs`): a new
+    or empty directory or one holding an output set only, writable, with a writable parent, and
+    not the filesystem root, the current directory (or above it) or the home directory. Returns
+    the real path (symbolic links resolved): the directory that will be replaced."""
+    check_writable(out)
+    shown = str(out)
+    real = Path(out).resolve()
+    try:
+        home = Path.home().resolve()
+    except RuntimeError:  # no home directory known
+        home = None
+    special = ("the filesystem root" if real == Path(real.anchor) else
+               "the current directory or above it" if Path.cwd().resolve().is_relative_to(real) else
+               "the home directory" if real == home else None)
+    if special:
+        raise OutputError(f"refusing to write outputs to {shown!r}: it is {special}, and the output directory is "
+                          "replaced whole; choose an empty or cvxdual-written --out")
+    if real.exists():
+        if not os.access(real.parent, os.W_OK | os.X_OK):
+            raise OutputError(f"cannot replace output directory {shown!r}: its parent {str(real.parent)!r} is not "
+                              "writable; choose another --out")
+        _check_owned(real, shown)
+    return real
 
 
 def prepare_dir(out: str | Path) -> Path:
@@ -140,11 +195,12 @@ def figures(sol) -> dict:
 
 
 def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
-    """Write every output of ``sol`` to directory ``out``; return the paths written.
+    """Write every output of ``sol`` as the set in directory ``out``; return the paths written.
 
-    All files are written to temporaries first and renamed into place only when every one of
-    them succeeded: a failure leaves the previous set of outputs (or none), never a mix."""
-    out = prepare_dir(out)
+    The set replaces ``out`` whole (see the module docstring): any failure leaves the previous
+    set (or none), never a mix, and the error says so."""
+    out = Path(out)
+    real = check_output_dir(out)
     writers = {
         "summary.json": lambda p: p.write_text(json_text(sol.summary())),
         "contact.csv": lambda p: contact_table(sol).to_csv(p, index=False, float_format="%.12g"),
@@ -153,18 +209,17 @@ def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
     if plots:
         for name, fig in figures(sol).items():  # noqa: B007 - fig is bound in the lambda
             writers[name] = lambda p, fig=fig: fig.savefig(p, dpi=130, format="png")
-    staged: list[tuple[Path, Path]] = []
+    assert set(writers) <= set(SET_FILES)
     try:
-        for name, write in writers.items():
-            staged.append((temp_beside(out / name), out / name))
-            write(staged[-1][0])
-        for tmp, final in staged:
-            os.replace(tmp, final)
-    except Exception as e:  # noqa: BLE001 - any failure: remove the temporaries, keep the old set
-        for tmp, _ in staged:
-            tmp.unlink(missing_ok=True)
+        real.parent.mkdir(parents=True, exist_ok=True)
+        with staged_dir(real) as stage:
+            for name, write in writers.items():
+                write(stage / name)
+            replace_dir(stage, real, check=lambda d: _check_owned(d, str(out)))
+    except OutputError:
+        raise  # says itself what was changed
+    except Exception as e:  # noqa: BLE001 - any failure before the swap: the staging directory is gone
         what = e.strerror if isinstance(e, OSError) and e.strerror else f"{type(e).__name__}: {e}"
-        raise OutputError(f"cannot write outputs to {str(out)!r} ({what}); nothing was changed there; "
+        raise OutputError(f"cannot write outputs to {str(out)!r} ({what}); nothing was changed in {str(out)!r}; "
                           "choose a writable --out") from None
-    return [final for _, final in staged]
-
+    return [out / name for name in writers]

@@ -79,8 +79,10 @@ def test_old_outputs_kept_when_writing_fails(tmp_path, monkeypatch, capsys, erro
     assert main(["solve", "--scene", "patch", "--level", "1", "--out", str(out), "--no-plots"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("cvxdual: error: cannot write outputs") and len(err.strip().splitlines()) == 1
-    # the whole previous set is intact (summary.json is written before the VTU): no mix of runs
+    assert "nothing was changed in" in err
+    # the whole previous set is intact (summary.json is written before the VTU): no mix of runs, no temporaries
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["o"]
 
 
 BAD = [
@@ -124,7 +126,7 @@ def test_unwritable_output(tmp_path, capsys):
     assert main(["solve", "--scene", "patch", "--level", "0", "--out", str(blocker / "sub")]) == 1
     err = capsys.readouterr().err
     assert "not a directory" in err
-    assert blocker.read_text() == "x"
+    assert blocker.read_text() == "x" and [p.name for p in tmp_path.iterdir()] == ["file"]
 
 
 GEOMETRY_BAD = [

@@ -1,0 +1,163 @@
+"""The acceptance experiment of output sets (issue 13): `kill -9` at random moments of a level-6 write.
+
+    python studies/kill_write.py                    # 20 trials at level 6, writes reports/kill_write.md
+    python studies/kill_write.py --level 2 --trials 5 --report out/kill_write.md    # a quick check
+
+Two distinguishable sets: `hertz` at level 6 with the fast solver (A) and the same with a lower
+load (B, `exact.load=30000`), each written once into a reference directory and hashed; T is the
+mean time of two full writes over an existing set by a forked child, as in the trials. Per
+trial, the target holds one set; a forked child writes the other into it and is killed (SIGKILL)
+at a uniformly random moment in [0, 1.1 T]. The target must then be byte-identical to A or to B.
+A complete write follows (the next run), which must leave the target holding its set and nothing
+else in the parent directory (no staging directories, no temporaries). Exits 1 if any trial saw
+a mix or leftovers after the next run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import random
+import shutil
+import signal
+import sys
+import time
+from pathlib import Path
+
+import cvxdual
+from cvxdual import files
+from cvxdual.files import write_text
+from cvxdual.output import write_outputs
+from cvxdual.scenefile import load_scene, parse_assignment
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def digest(d: Path) -> dict[str, str] | None:
+    """File name -> sha256 of directory ``d`` (None if it is missing)."""
+    if not d.is_dir():
+        return None
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(d.iterdir())}
+
+
+def leftovers(parent: Path, target: Path) -> str:
+    """Everything in ``parent`` but ``target``, and hidden entries inside ``target``, with sizes."""
+    extra = [p for p in parent.iterdir() if p != target]
+    if target.is_dir():
+        extra += [p for p in target.iterdir() if p.name.startswith(".")]
+    if not extra:
+        return "none"
+    size = sum(f.stat().st_size for p in extra for f in ([p] if p.is_file() else p.rglob("*")) if f.is_file())
+    return f"{', '.join(sorted(p.name for p in extra))} ({size / 1e6:.1f} MB)"
+
+
+def forked_write(sol, target: Path) -> float:
+    """Seconds for a forked child to write ``sol`` to ``target`` (the trials' conditions)."""
+    t0 = time.perf_counter()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            write_outputs(sol, target)
+            code = 0
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, "a full write failed"
+    return time.perf_counter() - t0
+
+
+def killed_write(sol, target: Path, delay: float) -> tuple[bool, float]:
+    """Fork a child writing ``sol`` to ``target``, SIGKILL it ``delay`` s after the fork; return
+    (killed before it finished, seconds after the fork when the kill was sent)."""
+    t0 = time.perf_counter()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            write_outputs(sol, target)
+        finally:
+            os._exit(0)
+    time.sleep(max(0.0, t0 + delay - time.perf_counter()))
+    at = time.perf_counter() - t0
+    os.kill(pid, signal.SIGKILL)
+    _, status = os.waitpid(pid, 0)
+    return os.WIFSIGNALED(status), at
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--level", type=int, default=6)
+    ap.add_argument("--seed", type=int, default=13)
+    ap.add_argument("--work", type=Path, default=ROOT / "out" / "kill_write", help="scratch directory (removed)")
+    ap.add_argument("--report", type=Path, default=ROOT / "reports" / "kill_write.md")
+    args = ap.parse_args(argv)
+    rng = random.Random(args.seed)
+
+    scene_a = load_scene("hertz")
+    scene_b = load_scene("hertz", [parse_assignment("exact.load=30000.0")])
+    print(f"solving hertz at level {args.level} (two loads) ...", flush=True)
+    sols = {k: cvxdual.solve(s, level=args.level, solver="fast") for k, s in (("A", scene_a), ("B", scene_b))}
+    shutil.rmtree(args.work, ignore_errors=True)
+    parent = args.work / "target"
+    parent.mkdir(parents=True)
+    target = parent / "set"
+    refs = {}
+    for k, sol in sols.items():
+        write_outputs(sol, args.work / f"ref{k}")
+        refs[k] = digest(args.work / f"ref{k}")
+    assert refs["A"] != refs["B"]
+    write_outputs(sols["A"], target)
+    times = [forked_write(sols[k], target) for k in ("B", "A")]  # T: as in the trials, ends with A
+    T = sum(times) / len(times)
+    size = sum(p.stat().st_size for p in (args.work / "refA").iterdir()) / 1e6
+    print(f"full write T = {T:.2f} s ({size:.1f} MB, {len(refs['A'])} files)", flush=True)
+
+    rows, bad = [], 0
+    for i in range(1, args.trials + 1):
+        held = next(k for k, h in refs.items() if h == digest(target))
+        other = "B" if held == "A" else "A"
+        killed, at = killed_write(sols[other], target, rng.uniform(0.0, 1.1 * T))
+        got = digest(target)
+        outcome = next((k for k, h in refs.items() if h == got), "missing" if got is None else "MIX")
+        before = leftovers(parent, target)
+        write_outputs(sols[other], target)  # the next run
+        after = leftovers(parent, target)
+        ok = outcome in refs and after == "none" and digest(target) == refs[other]
+        bad += not ok
+        rows.append(f"| {i} | {held} -> {other} | {at:.2f} | {at / T:.0%} | {'killed' if killed else 'had finished'} "
+                    f"| {outcome} | {before} | {after} | {'yes' if ok else 'NO'} |")
+        print(rows[-1], flush=True)
+    shutil.rmtree(args.work)
+
+    swap = "renameat2(RENAME_EXCHANGE)" if files._RENAMEAT2 is not None else "two renames (fallback)"
+    text = "\n".join([
+        "# Output sets under `kill -9`",
+        "",
+        f"Generated by `studies/kill_write.py` (seed {args.seed}). Target: the output set of `hertz` at level "
+        f"{args.level} (`--solver fast`), {len(refs['A'])} files, {size:.1f} MB; set A at the scene's load, set B "
+        f"with `exact.load=30000`. Full write T = {T:.2f} s; swap by {swap}.",
+        "",
+        "Per trial, a forked writer of the other set is killed (SIGKILL) at a uniformly random moment of "
+        "[0, 1.1 T] after the fork; the target is then compared, file by file (sha256), with the reference sets. "
+        "'Leftovers' are the entries of the target's parent other than the target (and hidden files in it), "
+        "before and after the next complete run.",
+        "",
+        "| trial | set: held -> written | kill at [s] | of T | writer | target after the kill | leftovers before "
+        "the next run | leftovers after it | ok |",
+        "|---|---|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+        f"{args.trials - bad} of {args.trials} trials ok: " + (
+            "the target was always the old set or the new one, and the next run left nothing behind."
+            if not bad else "SOME TRIALS FAILED."),
+        "",
+    ])
+    write_text(args.report, text)
+    print(f"wrote {args.report}")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
