@@ -32,8 +32,76 @@ from .cache import Cache, code_version, content_key
 from .spec import Case, Reference, StudyError, load_module
 
 EDGE_RADIUS = 0.1  # times a: the discs around the Hertz contact edges (0.03% of the hertz domain)
-REQUIRED = ("scene", "triangulation", "stress_space", "level", "solver", "overrides", "n_pieces", "h", "error_l2",
-            "error_l2_rel", "reference", "status", "t_total", "worker")
+
+# What a cached entry must hold to be used (JSON types: a number is int or float, a NaN is None)
+TEXT, INT, NUM, MAYBE = (str,), (int,), (int, float), (int, float, type(None))
+ROW_TYPES = {"scene": TEXT, "triangulation": TEXT, "stress_space": TEXT, "level": INT, "solver": TEXT,
+             "overrides": TEXT, "n_pieces": INT, "h": NUM, "error_l2": MAYBE, "error_l2_rel": MAYBE,
+             "reference": TEXT, "status": TEXT, "t_total": MAYBE, "worker": TEXT}
+REQUIRED = tuple(ROW_TYPES)
+IDENTITY = ("study", "case", "group", "scene", "overrides", "units", "triangulation", "stress_space", "level",
+            "solver", "reference")  # a row of this case: these columns are its base_row's
+NUMERIC = {"h_min", "h_ratio", "iterations", "duality_gap", "contact_x_min", "contact_x_max", "peak_pressure",
+           "total_force", "peak_mb", "reference_error_est", "edge_error_share"}
+NUMERIC_PREFIXES = ("error_", "res_", "t_", "n_")
+MEASURED = {"error_l2": NUM, "error_l2_rel": NUM, "error_energy_rel": NUM, "reference_error_est": NUM}
+INFO_TYPES = {"level": INT, "triangulation": TEXT, "solver": TEXT, "n_pieces": INT, "d_last": NUM,
+              "d_before": NUM, "rate": MAYBE, "error_est": NUM}
+
+
+def _typed(d: dict, types: dict) -> bool:
+    return all(k in d and type(d[k]) in t for k, t in types.items())
+
+
+def _numbers_ok(row: dict) -> bool:
+    """The numeric columns hold numbers (or None: NaN), errors (norms) none below zero."""
+    return all(type(v) in MAYBE and not (k.startswith("error_") and v is not None and v < 0)
+               for k, v in row.items() if k in NUMERIC or k.startswith(NUMERIC_PREFIXES))
+
+
+def load_case_row(cache: Cache, key: str, case: Case) -> dict | None:
+    """The cached row of ``case``, or ``None``: besides the entry's own checks (key, checksum),
+    the columns the study computes with have their types, the row is this case's (its
+    identity columns), its errors against a finer reference are finite numbers, and its saved
+    stresses (``compare``) load and fit its mesh."""
+    from ..files import to_jsonable as clean
+    base = clean(base_row(case))
+
+    def ok(row: dict) -> bool:
+        return (_typed(row, ROW_TYPES) and _numbers_ok(row) and all(row.get(k) == base[k] for k in IDENTITY)
+                and (case.reference.kind != "finer" or case.solver == "limit" or _typed(row, MEASURED))
+                and (not case.save_stress or case.stress_space != "p0"
+                     or (row.get("stress_key") == "s" + key
+                         and load_saved_stress(cache, "s" + key, row["n_pieces"]) is not None)))
+    return cache.get_row(key, check=ok)
+
+
+def load_saved_stress(cache: Cache, key: str, n_pieces) -> dict | None:
+    """A case's saved ``stress`` ``(n_pieces, 3)`` and piece ``area`` ``(n_pieces,)``, or ``None``."""
+    if not (type(n_pieces) is int and isinstance(key, str) and key.isascii() and key.isalnum()):
+        return None
+    return cache.get_arrays(key, {"stress": (n_pieces, 3), "area": (n_pieces,)})
+
+
+def load_reference_info(cache: Cache, key: str, ref: Reference) -> dict | None:
+    """A reference's cached info (:func:`reference_info_task`), or ``None``: of this reference
+    (level, triangulation, solver), with its types and non-negative differences."""
+    def ok(info: dict) -> bool:
+        return (_typed(info, INFO_TYPES) and info["n_pieces"] > 0
+                and (info["level"], info["triangulation"], info["solver"]) == (ref.level, ref.triangulation, ref.solver)
+                and min(info["d_last"], info["d_before"], info["error_est"]) >= 0)
+    return cache.get_row(key, check=ok)
+
+
+def usable_reference(stress: np.ndarray) -> bool:
+    """A reference to measure relative errors against: finite, and not zero everywhere."""
+    return bool(np.all(np.isfinite(stress)) and np.any(stress != 0))
+
+
+def load_reference_stress(cache: Cache, key: str, n_pieces: int) -> np.ndarray | None:
+    """A reference field's cached stress ``(n_pieces, 3)`` (finite, not all zero), or ``None``."""
+    hit = cache.get_arrays(key, {"stress": (n_pieces, 3)}, check=lambda a: usable_reference(a["stress"]))
+    return None if hit is None else hit["stress"]
 
 
 def scene_of(source: str, overrides: tuple, units: tuple | None):
@@ -75,22 +143,29 @@ class Field:
 _MEMO: dict = {}  # the last reference field this process loaded: {key: Field}
 
 
-def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool = True) -> tuple[Field, bool]:
+def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool = True,
+                    ensure_cached: bool = False) -> tuple[Field, bool]:
     """The fast-path (or ``ref.solver``) solution at ``level``, from the memo, the cache, or solved
-    (and then cached); ``(field, computed)``."""
+    (and then cached); ``(field, computed)``. With ``ensure_cached``, a field taken from the memo
+    is written again if its cache entry does not load (other workers read it there)."""
     from .. import discretize, solve
     key = field_key(repr(scene), ref, level)
     if key in _MEMO:
-        return _MEMO[key], False
+        f = _MEMO[key]
+        if ensure_cached and load_reference_stress(cache, key, len(f.stress)) is None:
+            cache.put_arrays(key, stress=f.stress)
+        return f, False
     mesh, pieces, _ = discretize(scene, ref.triangulation, level)
-    hit = cache.get_arrays(key, {"stress": (len(pieces), 3)})
-    computed = hit is None
+    stress = load_reference_stress(cache, key, len(pieces))
+    computed = stress is None
     if computed:
         sol = solve(scene, ref.triangulation, level, ref.solver, check=True)
         stress = np.asarray(sol.stress, float)
+        if not usable_reference(stress):
+            raise CvxdualError(f"the reference of scene {scene.name!r} ({ref.triangulation}, level {level}, "
+                               f"{ref.solver}) is zero everywhere or not finite: errors relative to it are "
+                               "undefined (is the scene loaded?)")
         cache.put_arrays(key, stress=stress)
-    else:
-        stress = hit["stress"]
     f = Field(scene, mesh, pieces, stress)
     if keep:
         _MEMO.clear()
@@ -102,7 +177,7 @@ def reference_level_task(source: str, overrides: tuple, units, ref: Reference, l
     """Worker task: make sure the reference field at ``level`` is in the cache."""
     scene = scene_of(source, overrides, units)
     t0 = time.perf_counter()
-    f, computed = reference_field(scene, ref, level, Cache(cache_root), keep=level == ref.level)
+    f, computed = reference_field(scene, ref, level, Cache(cache_root), keep=level == ref.level, ensure_cached=True)
     return {"level": level, "n_pieces": len(f.stress), "computed": computed, "time": time.perf_counter() - t0}
 
 
@@ -113,7 +188,7 @@ def reference_info_task(source: str, overrides: tuple, units, ref: Reference, me
     scene = scene_of(source, overrides, units)
     cache = Cache(cache_root)
     key = reference_key(repr(scene), ref, metrics)
-    hit = cache.get_row(key, ("level", "error_est", "n_pieces"))
+    hit = load_reference_info(cache, key, ref)
     if hit is not None:
         return hit
     m = dict(metrics)
@@ -187,7 +262,8 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
         import cProfile
         prof = cProfile.Profile()
         prof.enable()
-    sol = solve(scene, case.triangulation, case.level, case.solver, check=case.check, **kw)
+    # no hand-over to Clarabel: a study measures the path it names, failures included
+    sol = solve(scene, case.triangulation, case.level, case.solver, check=case.check, fallback=False, **kw)
     if prof is not None:
         prof.disable()
     out = solution_fields(sol)
@@ -262,6 +338,10 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
         out["reference_error_est"] = ref_info["error_est"]
     else:
         return out
+    if not all(np.isfinite(err[k]) for k in ("l2", "l2_rel", "energy", "energy_rel")):
+        what = "exact field" if ref.kind == "exact" else f"reference ({ref.label()})"
+        raise CvxdualError(f"the {what} has a zero norm: relative errors against it are undefined "
+                           "(is the scene loaded?)")
     out.update(error_l2=err["l2"], error_l2_rel=err["l2_rel"], error_energy=err["energy"],
                error_energy_rel=err["energy_rel"])
     return out

@@ -30,6 +30,14 @@ def ok_rows(df: pd.DataFrame) -> pd.DataFrame:
     return df[df["status"].astype(str).str.startswith("optimal")]
 
 
+def measured_rows(df: pd.DataFrame) -> pd.DataFrame:
+    """The solved rows with a finite relative L2 error (none when no row has one: every case failed)."""
+    d = ok_rows(df)
+    if "error_l2_rel" not in d:
+        return d.iloc[:0]
+    return d[np.isfinite(pd.to_numeric(d["error_l2_rel"], errors="coerce").to_numpy(float))]
+
+
 def series_keys(df: pd.DataFrame) -> list[str]:
     """The columns that tell series apart: scene, triangulation, and whatever else varies."""
     keys = ["scene", "triangulation"]
@@ -42,8 +50,7 @@ def series_keys(df: pd.DataFrame) -> list[str]:
 def rates(df: pd.DataFrame, last: int | None = None, keys: list[str] | None = None) -> pd.DataFrame:
     """Fitted rates of the relative L2 and energy errors against h, per series (all levels, or
     the last ``last``)."""
-    d = ok_rows(df)
-    d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+    d = measured_rows(df)
     keys = keys or series_keys(df)
     out = []
     for k, g in d.groupby(keys, sort=False):
@@ -62,8 +69,7 @@ def rates_table(df: pd.DataFrame) -> pd.DataFrame:
     """The report's table: rates over all levels and the last three, finest pieces and error."""
     keys = series_keys(df)
     all_r, last_r = rates(df, keys=keys), rates(df, 3, keys=keys)
-    d = ok_rows(df)
-    d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+    d = measured_rows(df)
     if d.empty:
         return pd.DataFrame()
     fin = d.loc[d.groupby(keys, sort=False)["level"].idxmax()]
@@ -171,7 +177,7 @@ def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
         label = scene + (f" ({k[1]})" if len(k) > 1 and k[1] else "") + (f" [{k[2]}]" if len(k) > 2 and k[2] else "")
         ref = str(g["reference"].iloc[0])
         levels = sorted(g["level"].unique())
-        n = pd.to_numeric(g["n_pieces"], errors="coerce").dropna()
+        n = pd.to_numeric(g.get("n_pieces", pd.Series(dtype=float)), errors="coerce").dropna()
         size = f", {int(n.min())} to {int(n.max())} pieces" if len(n) else ""
         if ref == "exact":
             how = "against the exact field" + (f", {rule}x{rule} Gauss points per piece" if rule else "")
@@ -183,12 +189,20 @@ def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
                    f"({r['n_pieces']} pieces), {'fast path' if r.get('solver') == 'fast' else r.get('solver')}, "
                    f"{_metric(df, 'ref_rule', 2)}x{_metric(df, 'ref_rule', 2)} points per reference piece "
                    f"({_metric(df, 'ref_fine', 6)}x{_metric(df, 'ref_fine', 6)} on those straddling studied "
-                   f"pieces); its estimated relative error is {r['error_est']:.2g} (last differences "
-                   f"{r['d_before']:.3g}, {r['d_last']:.3g}, rate {r['rate']:.2f})")
+                   f"pieces); its estimated relative error is {_num(r.get('error_est'), '.2g')} (last "
+                   f"differences {_num(r.get('d_before'), '.3g')}, {_num(r.get('d_last'), '.3g')}, "
+                   f"rate {_num(r.get('rate'), '.2f')})")
         else:
             how = f"against a reference ({ref})"
         out.append(f"- `{label}`: levels {min(levels)}-{max(levels)}{size}; {how}.")
     return out
+
+
+def _num(v, fmt: str) -> str:
+    """``v`` formatted, or ``n/a`` where it is not a finite number (a rate is NaN, stored as
+    None, when the differences do not decrease: a converged or round-off-level reference)."""
+    ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
+    return format(v, fmt) if ok else "n/a"
 
 
 def _metric(df: pd.DataFrame, name: str, default=None):
@@ -221,8 +235,7 @@ def markdown(df: pd.DataFrame, study, out_name: str) -> str:
         tab = rates_table(df)
         lines += ["## Fitted rates (relative L2 error against h, least squares in log-log)", "",
                   md_table(tab) if len(tab) else "No series with errors.", ""]
-        d = ok_rows(df)
-        d = d[np.isfinite(d["error_l2_rel"].astype(float))]
+        d = measured_rows(df)
         keys = series_keys(df)
         mono = {" ".join(str(x) for x in (k if isinstance(k, tuple) else (k,)) if str(x)):
                 bool(np.all(np.diff(g.sort_values("level")["error_l2_rel"].astype(float)) < 0))

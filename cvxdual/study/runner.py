@@ -31,6 +31,9 @@ from .cases import (
     REQUIRED,
     base_row,
     case_key,
+    load_case_row,
+    load_reference_info,
+    load_saved_stress,
     reference_info_task,
     reference_key,
     reference_level_task,
@@ -62,8 +65,10 @@ def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, wo
     else:
         root = Path(cache).resolve()  # content keys: one directory serves every study (shared references)
     try:
+        from ..output import check_writable
+        for d in (root, root / "rows", root / "arrays"):  # the cache's layout: refused before any case runs
+            check_writable(d, "the study cache", "--cache")
         if out is not None:
-            from ..output import check_writable
             check_writable(out)
         df = _run(study, root, scheduler, workers, memory_limit, quiet, client)
     finally:
@@ -101,7 +106,7 @@ def _run(study: Study, root: Path, scheduler, workers, memory_limit, quiet: bool
     rows: dict = {}
     todo = []
     for i, k in enumerate(keys):
-        hit = store.get_row(k, REQUIRED)
+        hit = load_case_row(store, k, cases[i])
         if hit is not None:
             rows[k] = {**hit, "key": k, "cached": True}
         else:
@@ -109,13 +114,14 @@ def _run(study: Study, root: Path, scheduler, workers, memory_limit, quiet: bool
     refs: dict = {}
     need_refs = {reference_key(reprs[i], cases[i].reference, cases[i].metrics): i for i in range(len(cases))
                  if cases[i].reference.kind == "finer"}
-    for rk in need_refs:
-        hit = store.get_row(rk, ("level", "error_est", "n_pieces"))
+    for rk, i in need_refs.items():
+        hit = load_reference_info(store, rk, cases[i].reference)
         if hit is not None:
             refs[rk] = hit
-    if todo:
+    missing = [i for rk, i in need_refs.items() if rk not in refs]  # recomputed even if every row is cached
+    if todo or missing:
         with _client(client, scheduler, workers, memory_limit) as cl:
-            _execute(cl, study, cases, keys, reprs, todo, refs, store, rows, quiet)
+            _execute(cl, study, cases, keys, reprs, todo, refs, store, rows, quiet, missing)
     ordered = [rows[k] for k in keys]
     if study.compare:
         _compare(ordered, study.compare, store)
@@ -208,7 +214,7 @@ def _no_retries(client) -> None:
         pass
 
 
-def _execute(client, study, cases, keys, reprs, todo, refs, store, rows, quiet) -> None:
+def _execute(client, study, cases, keys, reprs, todo, refs, store, rows, quiet, missing=()) -> None:
     from distributed import as_completed
     from distributed.client import FutureCancelledError
     from tqdm import tqdm
@@ -216,7 +222,7 @@ def _execute(client, study, cases, keys, reprs, todo, refs, store, rows, quiet) 
     ref_futs: dict = {}
     all_futs = []
     order = {}
-    for i in todo:
+    for i in dict.fromkeys([*todo, *missing]):
         c = cases[i]
         v = (c.scene_source, repr(c.overrides), c.units)
         order.setdefault(v, len(order))
@@ -314,9 +320,9 @@ def _compare(rows: list[dict], solvers: tuple, store: Cache) -> None:
 
 
 def _stress(row: dict | None, store: Cache) -> dict | None:
-    if row is None or not row.get("stress_key"):
+    if row is None or not row.get("stress_key") or row["stress_key"] != "s" + str(row.get("key")):
         return None
-    return store.get_arrays(row["stress_key"], {"stress": (-1, 3), "area": (-1,)})
+    return load_saved_stress(store, row["stress_key"], row.get("n_pieces"))
 
 
 def add_local_rates(df: pd.DataFrame) -> None:

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import CvxdualError
+from ..validate import file_stem
 
 STRESS_SPACES = ("p0", "eq")
 TRIANGULATIONS = ("type1", "type2")
@@ -275,8 +276,8 @@ def load_spec(source, quick: bool = False) -> Study:
         mod, hooks_path = load_module(hp), str(hp)
     elif mod is not None:
         hooks_path = str(path)
-    name = raw.get("name") or (path.stem if path else None)
-    if not name or not isinstance(name, str) or "/" in name:
+    name = raw.get("name") or (file_stem(path.stem) if path else None)
+    if not name or not isinstance(name, str) or file_stem(name) != name:
         raise StudyError("study spec: 'name' must be a plain file stem (e.g. name = \"convergence\")")
     if quick:
         q = raw.get("quick", {})
