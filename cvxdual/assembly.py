@@ -25,6 +25,8 @@ from .pieces import Pieces
 from .rigid import rigid_modes
 from .sparse import assemble_blocks
 
+STRAIN_RANGE = (1e-30, 1e6)  # load / stiffness ratios the package computes with
+
 
 @dataclass(frozen=True)
 class Scales:
@@ -153,6 +155,9 @@ def assemble(mesh: Mesh, pieces: Pieces, ties: np.ndarray | None = None) -> Syst
     """
     scene = mesh.scene
     E, Ah, C = stress_operators(mesh, pieces)
+    if not (np.all(np.isfinite(E.data)) and np.all(np.isfinite(Ah.data))):
+        raise SceneError("the element matrices are not finite: the scene's sizes or moduli are too far apart "
+                         "for double precision; rescale the units")
     rdof = free_dofs(mesh, ties)
     n_r = int(rdof.max()) + 1
     free = np.flatnonzero(rdof >= 0)
@@ -188,4 +193,11 @@ def problem_scales(scene, f: np.ndarray, eps: np.ndarray) -> Scales:
     s = max(s_load, s_fit)
     if s == 0.0:
         s = Eref * 1e-6  # unloaded: any scale works, the solution is zero
+    strain = s / Eref
+    # Strains beyond this range have no meaning in linear elasticity at the top, and at the
+    # bottom make the displacement and energy scales (strain^1, strain^2 times the sizes)
+    # leave double precision in the checks.
+    if not (STRAIN_RANGE[0] <= strain <= STRAIN_RANGE[1]):
+        raise SceneError(f"the loads are {strain:.3g} times the stiffness (a strain of that size), outside "
+                         f"[{STRAIN_RANGE[0]:g}, {STRAIN_RANGE[1]:g}]; check the units of E and of the loads")
     return Scales(L, Eref, s)

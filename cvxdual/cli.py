@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from .errors import CvxdualError
+
+MAX_MESSAGE = 400  # characters of an error line: a sentence, never a dump of the input
 
 
 def _fmt(v, spec=".4g"):
@@ -33,6 +36,8 @@ def human_summary(sol, written=()) -> str:
          else f"residuals: admissibility {r['admissibility']:.1e} (exact to rounding), penetration "
          f"{r['penetration']:.1e}; relative gap G {s['duality_gap']:.1e}"),
     ]
+    if s["fallback"]:
+        lines.append(f"note: {s['fallback']}")
     if s["exact"] and s["exact"].get("kind") == "hertz":
         e = s["exact"]
         lines.append(f"Hertz: a = {e['a']:.4g} {L}, p0 = {e['p0']:.4g} {S}")
@@ -58,19 +63,21 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_solve(args) -> int:
-    from .output import check_writable, write_outputs
+    from .output import check_output_dir, write_outputs
     from .pipeline import solve
     from .scenefile import load_scene, parse_assignment
     from .solvers import resolve_solver
     from .triangulation import check_triangulation
+    from .validate import file_stem
 
     scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])
     solver = resolve_solver(args.solver)
     check_triangulation(args.triangulation)
-    out = None if args.no_output else Path(args.out or Path("out") / scene.name)
+    out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
-        check_writable(out)  # fail before the work, and create nothing until there are results
-    sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds)
+        check_output_dir(out)  # fail before the work, and create nothing until there are results
+    sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
+                max_memory=args.max_memory)
     written = write_outputs(sol, out, plots=not args.no_plots) if out is not None else []
     print(human_summary(sol, written))
     return 0
@@ -103,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default=None, help="output directory (default: out/<scene>)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.grading=4 (repeatable)")
+    s.add_argument("--max-memory", default=None, metavar="SIZE",
+                   help="refuse runs estimated to need more memory, e.g. 16GB, or 'none' (default: the memory "
+                   "available, or $CVXDUAL_MAX_MEMORY)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
@@ -115,15 +125,33 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except CvxdualError as e:
-        msg = " ".join(str(e).split())
-        print(f"cvxdual: error: {msg}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("cvxdual: interrupted", file=sys.stderr)
-        return 130
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            status = args.func(args)
+        except CvxdualError as e:
+            return _fail(e.cli or str(e))
+        except MemoryError:
+            return _fail("ran out of memory; lower --level or free memory (see --max-memory)")
+        except RecursionError:
+            return _fail("the input is nested too deeply to process")
+        except KeyboardInterrupt:
+            print("cvxdual: interrupted", file=sys.stderr)
+            return 130
+    for text in dict.fromkeys(_one_line(str(w.message)) for w in caught):  # a run that worked: its warnings, once
+        print(f"cvxdual: warning: {text}", file=sys.stderr)
+    return status
+
+
+def _one_line(text: str, limit: int = MAX_MESSAGE) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 4] + " ..."
+
+
+def _fail(message: str) -> int:
+    """One line on stderr and exit status 1 (warnings that led up to the error are dropped)."""
+    print(f"cvxdual: error: {_one_line(message)}", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,7 +8,12 @@ from __future__ import annotations
 
 
 class CvxdualError(Exception):
-    """Base class of all errors raised by cvxdual."""
+    """Base class of all errors raised by cvxdual. ``cli`` is the same message with advice for
+    the command line (``--level`` rather than ``level=``), where the two differ."""
+
+    def __init__(self, message: str = "", cli: str | None = None):
+        super().__init__(message)
+        self.cli = cli
 
 
 class SceneError(CvxdualError, ValueError):
@@ -41,3 +46,7 @@ class OutputError(CvxdualError, OSError):
 
 class AccuracyError(CvxdualError):
     """A solution failed the package's own accuracy checks (residuals above the promised tolerances)."""
+
+
+class TooLargeError(CvxdualError):
+    """The run would need more memory than the limit allows (estimated before allocating)."""

@@ -31,6 +31,8 @@ from .sparse import assemble_blocks
 
 MAX_ITER = 60
 MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactorising
+REFINE_STEPS = 3  # iterative refinement of each solve, ...
+REFINE_TOL = 1e-12  # ... until the residual is at rounding of the load scale
 
 
 class _Base:
@@ -95,10 +97,18 @@ class ActiveSet:
         ok = rows >= 0
         return sp.csc_matrix((vals[ok], (rows[ok], cols[ok])), shape=(self.system.n_r, len(j)))
 
-    def _solve(self, base: _Base, rel: np.ndarray, add: np.ndarray) -> np.ndarray:
+    def _solve(self, base: _Base, rel: np.ndarray, add: np.ndarray, b_r: np.ndarray | None = None,
+               gap: np.ndarray | None = None) -> np.ndarray:
+        """``r`` of the active set ``base.active - rel + add``. With ``b_r`` and ``gap``: the
+        correction of the same system for right-hand side ``b_r`` and gaps ``gap`` instead of
+        ``g`` and ``eps`` (iterative refinement; the ties of ``base`` are then homogeneous)."""
         s = self.system
+        if b_r is None:
+            b_r, gap, rhs, expand = base.b_r, s.eps, base.rhs, base.expand
+        else:
+            rhs, expand = base.project(b_r), lambda z: base.expand(z) - base.r_e
         if not len(rel) and not len(add):
-            return base.expand(base.factor.solve(base.rhs))
+            return expand(base.factor.solve(rhs))
         jb_rel = s.jb[rel]
         Kc = self.k_columns(jb_rel)
         U = base.project(Kc.toarray())
@@ -109,21 +119,50 @@ class ActiveSet:
             m = zi >= 0
             W[zi[m], np.flatnonzero(m)] = sign
         M = np.hstack([U, W])
-        sol = base.factor.solve(np.column_stack([base.rhs, M]))
+        sol = base.factor.solve(np.column_stack([rhs, M]))
         y0, X = sol[:, 0], sol[:, 1:]
         m1 = len(rel)
         N = np.zeros((M.shape[1], M.shape[1]))
         N[:m1, :m1] = Kbb
         S = N - M.T @ X
-        rw = np.concatenate([base.b_r[jb_rel], s.eps[add]])
+        rw = np.concatenate([b_r[jb_rel], gap[add]])
         try:
             w = np.linalg.solve(S, rw - M.T @ y0)
         except np.linalg.LinAlgError:
             raise SolverError("fast path: singular update (the active set leaves a body free to move)") from None
-        r = base.expand(y0 - X @ w)
+        r = expand(y0 - X @ w)
         r[jb_rel] += w[:m1]
         self.stats["schur_updates"] += 1
         self.stats["max_update"] = max(self.stats["max_update"], M.shape[1])
+        return r
+
+    def _refine(self, base: _Base, rel: np.ndarray, add: np.ndarray, A: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Iterative refinement of ``r`` for the active set ``A``: the residual of the
+        equilibrium rows (the two rows of an active pair summed: its force is unknown) and of
+        the active gaps is solved again with the same factor, while that reduces it. An
+        ill-conditioned ``K`` (extreme materials or shapes) loses digits in one solve."""
+        s = self.system
+        scale = max(float(np.abs(self.g).max()), 1e-300)
+
+        def residual(r):
+            res = self.g - self.apply_k(r)
+            tied = res.copy()
+            tied[s.ja[A]] += tied[s.jb[A]]  # the pair's rows summed: the contact force cancels
+            tied[s.jb[A]] = 0.0
+            tied[self.anchored] = 0.0
+            gap = np.where(A, s.eps - (r[s.jb] - r[s.ja]), 0.0)
+            return res, max(float(np.abs(tied).max()) / scale, float(np.abs(gap).max()) / s.scales.displacement), gap
+
+        res, size, gap = residual(r)
+        for _ in range(REFINE_STEPS):
+            if size <= REFINE_TOL:
+                break
+            r_new = r + self._solve(base, rel, add, res, gap)
+            res_new, size_new, gap_new = residual(r_new)
+            if not size_new < 0.5 * size:  # stalls: the factor has nothing more to give
+                break
+            r, res, size, gap = r_new, res_new, size_new, gap_new
+            self.stats["refinements"] = self.stats.get("refinements", 0) + 1
         return r
 
     def initial(self) -> np.ndarray:
@@ -168,7 +207,7 @@ class ActiveSet:
                 base = _Base(self, A)
                 self.stats["factorizations"] += 1
                 rel = add = np.empty(0, int)
-            r = self._solve(base, rel, add)
+            r = self._refine(base, rel, add, A, self._solve(base, rel, add))
             force = (self.g - self.apply_k(r))[s.jb]
             force[~A] = 0.0
             opening = s.eps - (r[s.jb] - r[s.ja])
@@ -180,11 +219,12 @@ class ActiveSet:
                 return r, force, A
             key = new.tobytes()
             if key in seen:
-                raise SolverError("fast path: the active set cycles; use the CVXPY path (--solver CLARABEL)")
+                raise SolverError("fast path: the active set cycles; use the CVXPY path (solver='CLARABEL')",
+                                  cli="fast path: the active set cycles; use the CVXPY path (--solver CLARABEL)")
             seen.add(key)
             A = new
-        raise SolverError(f"fast path: no convergence in {MAX_ITER} active-set iterations; "
-                          "use the CVXPY path (--solver CLARABEL)")
+        what = f"fast path: no convergence in {MAX_ITER} active-set iterations; use the CVXPY path"
+        raise SolverError(f"{what} (solver='CLARABEL')", cli=f"{what} (--solver CLARABEL)")
 
 
 def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.ndarray) -> np.ndarray:

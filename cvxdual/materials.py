@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SceneError
-from .validate import number
+from .validate import number, short
 
 PLANES = ("strain", "stress")
 
@@ -57,14 +57,12 @@ class Material:
 
     @classmethod
     def hooke(cls, C, plane: str = "strain") -> "Material":
-        try:
-            arr = np.asarray(C, dtype=float)
-        except (TypeError, ValueError):
-            raise SceneError(f"a Hooke matrix must be 3x3 numbers (Voigt s11, s22, s12), got {C!r}") from None
-        if arr.shape != (3, 3):
-            raise SceneError(f"a Hooke matrix must be 3x3 (Voigt s11, s22, s12), got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise SceneError("the Hooke matrix contains NaN or infinite entries")
+        if isinstance(C, np.ndarray):
+            C = C.tolist()
+        rows = C if isinstance(C, (list, tuple)) and len(C) == 3 else None
+        if rows is None or not all(isinstance(r, (list, tuple)) and len(r) == 3 for r in rows):
+            raise SceneError(f"a Hooke matrix must be 3x3 numbers (Voigt s11, s22, s12), got {short(C)}")
+        arr = np.array([[number(v, "a Hooke matrix entry") for v in r] for r in rows])
         if not np.allclose(arr, arr.T, rtol=1e-12, atol=0.0):
             raise SceneError("the Hooke matrix must be symmetric")
         w = np.linalg.eigvalsh(arr)

@@ -23,6 +23,7 @@ import numpy as np
 
 from .errors import MeshError
 from .scene import Body, Scene
+from .validate import short
 
 _MAP_SAMPLES = 8001  # resolution of the numerically inverted grading map (sizes vary smoothly)
 
@@ -54,16 +55,41 @@ def graded_points(x0: float, x1: float, n0: int, level: int, focus=None, ratio: 
     ``max(1, round(n0 * its share of xi)) * 2**level`` intervals, uniform in ``xi``, so that
     every level is a refinement of the previous one and required points are always nodes.
     """
-    xs, xi = grading_map(x0, x1, focus, ratio)
-    brk = np.unique(np.clip(np.concatenate([[x0, x1], np.asarray(required, float)]), x0, x1))
-    xib = np.interp(brk, xs, xi)
+    brk, xib, counts, (xs, xi) = _stretches(x0, x1, n0, focus, ratio, required)
     pts = [brk[:1]]
     for k in range(len(brk) - 1):
-        m = max(1, int(round(n0 * (xib[k + 1] - xib[k])))) * 2**level
+        m = int(counts[k]) * 2**level
         t = np.linspace(xib[k], xib[k + 1], m + 1)[1:]
         pts.append(np.interp(t, xi, xs))
         pts[-1][-1] = brk[k + 1]
     return np.concatenate(pts)
+
+
+def _stretches(x0, x1, n0, focus, ratio, required):
+    """Break points, their graded parameters and the level-0 interval count of each stretch."""
+    xs, xi = grading_map(x0, x1, focus, ratio)
+    brk = np.unique(np.clip(np.concatenate([[x0, x1], np.asarray(required, float)]), x0, x1))
+    xib = np.interp(brk, xs, xi)
+    counts = np.maximum(1.0, np.round(float(n0) * np.diff(xib)))  # floats: a hostile n0 must not wrap around
+    return brk, xib, counts, (xs, xi)
+
+
+def mesh_size(scene: Scene, level: int, extra=()) -> dict:
+    """Triangles and nodes of the mesh of ``scene`` at ``level`` with the break points ``extra``
+    (as :func:`column_abscissae`), counted without building it (floats: a hostile level must
+    give a huge count, not an allocation or an overflow)."""
+    x0, x1 = scene.x_extent
+    spec = scene.mesh
+    required = [*(v for b in scene.bodies for v in b.x_range), *scene.contact, *(spec.focus or ()), *extra]
+    brk, _, counts, _ = _stretches(x0, x1, spec.columns, spec.focus, spec.grading, required)
+    scale = 2.0**level if level < 1000 else np.inf  # a hostile level: an infinite count, not an error
+    n_tri = n_nodes = 0.0
+    for body in scene.bodies:
+        inside = (brk[:-1] >= body.x_range[0]) & (brk[1:] <= body.x_range[1])
+        cols, layers = float(counts[inside].sum()) * scale, float(body.layers) * scale
+        n_tri += 2.0 * cols * layers
+        n_nodes += (cols + 1.0) * (layers + 1.0)
+    return {"triangles": n_tri, "nodes": n_nodes}
 
 
 @dataclass(frozen=True)
@@ -178,10 +204,10 @@ def column_abscissae(scene: Scene, level: int, extra=()) -> np.ndarray:
 def check_level(level) -> int:
     try:
         ok = not isinstance(level, bool) and int(level) == level and level >= 0
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
-        raise MeshError(f"mesh level must be a non-negative integer, got {level!r}")
+        raise MeshError(f"mesh level must be a non-negative integer, got {short(level)}")
     return int(level)
 
 

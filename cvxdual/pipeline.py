@@ -10,15 +10,18 @@ pipeline, transferred to level ``L``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from .assembly import System, assemble
-from .errors import CvxdualError, SceneError
+from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
+from .mesh import check_level
 from .scene import Scene
+from .sizing import check_size
 from .solution import Solution, check_solution, evaluate
-from .solvers import FAST, resolve_solver
+from .solvers import DEFAULT_SOLVER, FAST, resolve_solver
 from .triangulation import check_triangulation, discretize
 
 STRESS_SPACES = ("p0", "eq")  # the paper's piecewise-constant stresses; equilibrium (docs/equilibrium.md)
@@ -55,7 +58,7 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None):
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
           check: bool = True, warm_start: bool = True, stress_space: str = "p0", bounds: bool = False,
-          **solver_options) -> Solution:
+          max_memory=None, fallback: bool = True, **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
@@ -64,14 +67,48 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
     ``check`` false returns solutions that fail the accuracy checks (for studies of them).
+    Where the fast path fails (its checks, a cycling active set), the CVXPY path with Clarabel
+    solves instead, unless ``fallback`` is false; ``solver["fallback"]`` (and ``summary.json``)
+    then says why.
+    The run's memory is estimated first and refused above ``max_memory`` (bytes or ``"16GB"``;
+    default: the memory available, see :mod:`cvxdual.sizing`) with
+    :class:`~cvxdual.errors.TooLargeError`.
     """
     scene = as_scene(scene)
     solver = resolve_solver(solver)
     triangulation = check_triangulation(triangulation)
     stress_space = check_stress_space(stress_space)
-    level = scene.mesh.default_level if level is None else level
-    if stress_space == "eq":
-        return _solve_eq(scene, triangulation, level, solver, check, **solver_options)
+    level = check_level(scene.mesh.default_level if level is None else level)
+    if solver == FAST and solver_options:
+        raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
+                          "drop them or choose a CVXPY solver such as CLARABEL")
+    check_size(scene, level, solver == FAST, stress_space, bounds, max_memory)
+    run = _solve_eq if stress_space == "eq" else _solve_p0
+    try:
+        try:
+            return run(scene, triangulation, level, solver, check, warm_start, bounds, **solver_options)
+        except (SolverError, AccuracyError) as e:
+            if solver != FAST or not fallback:
+                raise
+            # the fast path failed where the CVXPY path may not: hand over, and say so
+            reason = " ".join(str(e).split())[:300]
+            try:
+                check_size(scene, level, False, stress_space, bounds, max_memory)
+                sol = run(scene, triangulation, level, DEFAULT_SOLVER, check, warm_start, bounds)
+            except CvxdualError as e2:  # both paths failed: say so, with both reasons
+                both = f"the fast path failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
+                raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
+            return replace(sol, solver={**sol.solver, "fallback": f"fast path failed ({reason}); "
+                                        f"solved by {DEFAULT_SOLVER}"})
+    except MemoryError:
+        raise TooLargeError(f"ran out of memory solving {scene.name!r:.40} at level {level}; lower the level or "
+                            "free memory", cli=f"ran out of memory solving {scene.name!r:.40} at level {level}; "
+                            "lower --level or free memory") from None
+
+
+def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool, warm_start: bool,
+              bounds: bool, **solver_options) -> Solution:
+    """The paper's P0 run (see :func:`solve`)."""
     if bounds:
         from .equilibrium import check_flat
         check_flat(scene)
@@ -115,7 +152,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
                "recover": t5 - t4, "total": t5 - t0}
-    sol = Solution(triangulation=triangulation, stress_space=stress_space, level=int(level), timings=timings,
+    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings=timings,
                    **fields)
     if check:
         check_solution(sol)
@@ -132,13 +169,22 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
     if not np.any(system.f) and np.all(system.eps >= 0):
         return None
     coarse_x = system.mesh.pair_x
-    u, info = solve_fast(system, warm_start_active(scene, triangulation, level - 2, coarse_x))
+    try:
+        u, info = solve_fast(system, warm_start_active(scene, triangulation, level - 2, coarse_x))
+    except SolverError:
+        return None  # a coarse level the fast path cannot solve gives no hint: start cold
     return transfer_active(coarse_x, info["active"], pair_x)
 
 
 def recover(model, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
     """The :class:`Solution` of a CVXPY model solved by the caller (``info`` from its ``solve``);
     the accuracy checks apply only if the user added no constraint."""
+    status = model.problem.status
+    if status is None:
+        raise SolverError("the model has not been solved; call model.solve() (or model.problem.solve()) first")
+    if status != "optimal":
+        raise SolverError(f"the model's last solve ended with status {status!r}, not 'optimal'; there is no "
+                          "solution to recover (see the solver's advice, or try CLARABEL)")
     fields = evaluate(model.system, model.stresses(), model.displacements(), info)
     sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings={}, **fields)
     if check and not model.extra:
@@ -190,11 +236,11 @@ def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -
     return model.stresses(), info
 
 
-def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool,
-              **solver_options) -> Solution:
+def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool, warm_start: bool,
+              bounds: bool, **solver_options) -> Solution:
     """The "eq" run: the P1 displacement from the fast path, the equilibrium stresses on the
-    same mesh, the certified bounds between them and the errors against an exact field.
-    (Flat faces: both triangulations are the same mesh.)"""
+    same mesh, the certified bounds between them (always: ``bounds`` is implied) and the errors
+    against an exact field. (Flat faces: both triangulations are the same mesh.)"""
     from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
     from .equilibrium import EquilibriumSpace, check_flat
     from .exact import exact_field
@@ -211,8 +257,18 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
         sigma = np.zeros((3 * space.n_tri, 3, 3))
         info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
     else:
-        u, p0_info = solve_fast(system, warm_start_active(scene, triangulation, level, system.mesh.pair_x))
-        sigma, info = solve_eq(space, solver, (system.mesh.pair_x, p0_info["active"]), **solver_options)
+        try:
+            start = warm_start_active(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
+            u, p0_info = solve_fast(system, start)
+            pairs = (system.mesh.pair_x, p0_info["active"])
+        except SolverError:
+            if solver == FAST:
+                raise
+            from .dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
+            model = DualModel(system)
+            model.solve(solver)
+            u, pairs = model.displacements(), None
+        sigma, info = solve_eq(space, solver, pairs, **solver_options)
     t3 = time.perf_counter()
     blocks = constraint_blocks(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
@@ -230,7 +286,7 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
         error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
                  "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
                  "displacement_energy": e["displacement_a"],
-                 "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else float("nan")}
+                 "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else None}
     t4 = time.perf_counter()
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
     sol = Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,

@@ -23,7 +23,7 @@ from typing import ClassVar
 import numpy as np
 
 from .errors import SceneError
-from .validate import number, table
+from .validate import number, short, table
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,11 @@ class Profile:
     def inflexions(self, x0: float, x1: float) -> np.ndarray:
         """Abscissae in ``(x0, x1)`` where the curvature changes sign."""
         return np.empty(0)
+
+    def count_inflexions(self, x0: float, x1: float) -> float:
+        """How many :meth:`inflexions` there are, without listing them (a hostile profile may
+        have billions)."""
+        return float(len(self.inflexions(x0, x1)))
 
     def domain(self) -> tuple[float, float]:
         """Interval of ``x`` on which the curve is defined as a graph."""
@@ -199,6 +204,9 @@ class Cosine(Profile):
         x = np.asarray(x, float)
         return self.y0 * x + self.amplitude / self._k * np.sin(self._k * (x - self.x0))
 
+    def count_inflexions(self, x0: float, x1: float) -> float:
+        return 0.0 if self.amplitude == 0 else max(0.0, np.floor(2 * (x1 - x0) / self.wavelength) + 1)
+
     def inflexions(self, x0: float, x1: float) -> np.ndarray:
         if self.amplitude == 0:
             return np.empty(0)
@@ -221,8 +229,8 @@ def profile_from_dict(d: dict, where: str) -> Profile:
     """Build a profile from a scene-file table such as ``{kind = "parabola", R = 50}``."""
     d = dict(table(d, where))
     kind = d.pop("kind", None)
-    if kind not in PROFILE_KINDS:
-        raise SceneError(f"{where}: unknown profile kind {kind!r}; choose one of {sorted(PROFILE_KINDS)}")
+    if not isinstance(kind, str) or kind not in PROFILE_KINDS:
+        raise SceneError(f"{where}: unknown profile kind {short(kind)}; choose one of {sorted(PROFILE_KINDS)}")
     cls: type[Profile] = PROFILE_KINDS[kind]
     if kind == "circle":
         branch = d.pop("branch", "lower")

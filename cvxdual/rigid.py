@@ -77,7 +77,9 @@ def rigid_modes(mesh, pieces, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, 
     if null.shape[1] == 0:
         return RigidModes(empty, empty, np.empty(0, int), f, 0.0)
     modes = cand[first] @ null  # (n_r, m)
-    _, s2, vt2 = np.linalg.svd(modes[jb] - modes[ja], full_matrices=True)
+    D = modes[jb] - modes[ja]
+    D = np.vstack([D, np.zeros((max(0, D.shape[1] - len(D)), D.shape[1]))])  # at least m rows: vt2 is m x m
+    _, s2, vt2 = np.linalg.svd(D, full_matrices=False)  # never the n_pairs^2 U
     rank = int(np.sum(s2 > 1e-9 * max(s2[0] if len(s2) else 0.0, 1.0)))
     floating, separating = modes @ vt2[rank:].T, modes @ vt2[:rank].T
     anchors, imbalance = np.empty(0, int), 0.0

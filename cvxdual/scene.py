@@ -27,9 +27,10 @@ import numpy as np
 from .errors import SceneError
 from .materials import Material
 from .profiles import Flat, Profile
-from .validate import integer, number, pair
+from .validate import integer, number, pair, short, text
 
 SIDES = ("face", "far", "left", "right")
+MAX_INFLEXIONS = 1000  # of a face over its body
 PART_KINDS = ("clamped", "sliding", "traction")
 POSITIONS = ("upper", "lower")
 
@@ -43,7 +44,7 @@ class Traction:
 
     def __post_init__(self):
         if self.kind not in ("uniform", "exact"):
-            raise SceneError(f"traction kind must be 'uniform' or 'exact', got {self.kind!r}")
+            raise SceneError(f"traction kind must be 'uniform' or 'exact', got {short(self.kind)}")
         object.__setattr__(self, "value", pair(self.value, "traction value"))
 
 
@@ -60,16 +61,18 @@ class BoundaryPart:
 
     def __post_init__(self):
         if self.on not in SIDES:
-            raise SceneError(f"boundary part {self.name!r}: 'on' must be one of {SIDES}, got {self.on!r}")
+            raise SceneError(f"boundary part {short(self.name)}: 'on' must be one of {SIDES}, got {short(self.on)}")
         if self.kind not in PART_KINDS:
-            raise SceneError(f"boundary part {self.name!r}: kind must be one of {PART_KINDS}, got {self.kind!r}")
+            raise SceneError(f"boundary part {short(self.name)}: kind must be one of {PART_KINDS}, "
+                             f"got {short(self.kind)}")
         if (self.kind == "traction") != (self.traction is not None):
-            raise SceneError(f"boundary part {self.name!r}: a traction part needs a 'traction' "
+            raise SceneError(f"boundary part {short(self.name)}: a traction part needs a 'traction' "
                              "(and only traction parts have one)")
         if self.interval is not None:
-            lo, hi = pair(self.interval, f"boundary part {self.name!r} interval")
+            lo, hi = pair(self.interval, f"boundary part {short(self.name)} interval")
             if not lo < hi:
-                raise SceneError(f"boundary part {self.name!r}: interval must have lo < hi, got {self.interval}")
+                raise SceneError(f"boundary part {short(self.name)}: interval must have lo < hi, "
+                                 f"got {short(self.interval)}")
             object.__setattr__(self, "interval", (lo, hi))
 
 
@@ -91,40 +94,63 @@ class Body:
 
     def __post_init__(self):
         if self.position not in POSITIONS:
-            raise SceneError(f"body {self.name!r}: position must be 'upper' or 'lower', got {self.position!r}")
-        x0, x1 = pair(self.x_range, f"body {self.name!r} x range")
+            raise SceneError(f"body {short(self.name)}: position must be 'upper' or 'lower', "
+                             f"got {short(self.position)}")
+        x0, x1 = pair(self.x_range, f"body {short(self.name)} x range")
         if not x0 < x1:
-            raise SceneError(f"body {self.name!r}: x range must have x0 < x1, got {self.x_range}")
+            raise SceneError(f"body {short(self.name)}: x range must have x0 < x1, got {short(self.x_range)}")
         object.__setattr__(self, "x_range", (x0, x1))
-        object.__setattr__(self, "body_force", pair(self.body_force, f"body {self.name!r} body_force"))
-        far = number(self.far, f"body {self.name!r}: far")
+        object.__setattr__(self, "body_force", pair(self.body_force, f"body {short(self.name)} body_force"))
+        far = number(self.far, f"body {short(self.name)}: far")
         object.__setattr__(self, "far", far)
-        integer(self.layers, f"body {self.name!r}: layers", minimum=1)
+        integer(self.layers, f"body {short(self.name)}: layers", minimum=1)
         if not isinstance(self.face, Profile):
-            raise SceneError(f"body {self.name!r}: face must be a profile (flat, parabola, circle, cosine)")
+            raise SceneError(f"body {short(self.name)}: face must be a profile (flat, parabola, circle, cosine)")
         if not isinstance(self.material, Material):
-            raise SceneError(f"body {self.name!r}: material must be a cvxdual.Material")
+            raise SceneError(f"body {short(self.name)}: material must be a cvxdual.Material")
         lo, hi = self.face.domain()
         if x0 < lo or x1 > hi:
-            raise SceneError(f"body {self.name!r}: its face ({self.face.kind}) is a graph only on "
+            raise SceneError(f"body {short(self.name)}: its face ({self.face.kind}) is a graph only on "
                              f"[{lo:g}, {hi:g}], not on the body's x range [{x0:g}, {x1:g}]; "
                              "shrink the body or enlarge the arc")
         # The far side must not touch the face: sample the face densely (the closed set of
         # profile kinds has at most a few oscillations per wavelength, resolved by 4001 points).
+        n_infl = self.face.count_inflexions(x0, x1)
+        if n_infl > MAX_INFLEXIONS:
+            raise SceneError(f"body {short(self.name)}: its face has {n_infl:.3g} inflexion points on the body, more "
+                             f"than {MAX_INFLEXIONS} (each stretch needs its own mesh columns, and the far-side check "
+                             "samples the face at 4 points per stretch); lengthen the wavelength")
         xs = np.linspace(x0, x1, 4001)
         fx = self.face.value(xs)
         if not np.all(np.isfinite(fx)):
-            raise SceneError(f"body {self.name!r}: its face is not finite on [{x0:g}, {x1:g}]")
+            raise SceneError(f"body {short(self.name)}: its face is not finite on [{x0:g}, {x1:g}]")
         gap = (far - fx) if self.position == "upper" else (fx - far)
         if gap.min() <= 0:
-            raise SceneError(f"body {self.name!r}: the face crosses the far side y = {far:g}; "
+            raise SceneError(f"body {short(self.name)}: the face crosses the far side y = {far:g}; "
                              f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
-        if self.focus_depth is not None and not number(self.focus_depth, f"body {self.name!r}: focus_depth") > 0:
-            raise SceneError(f"body {self.name!r}: focus_depth must be positive, got {self.focus_depth!r}")
+        if self.focus_depth is not None and not number(self.focus_depth, f"body {short(self.name)}: focus_depth") > 0:
+            raise SceneError(f"body {short(self.name)}: focus_depth must be positive, got {short(self.focus_depth)}")
         for part in self.boundary:
+            if part.interval is not None:
+                self._check_interval(part, x0, x1, far)
             if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
-                raise SceneError(f"body {self.name!r}: a {part.kind} support on a curved face is not "
+                raise SceneError(f"body {short(self.name)}: a {part.kind} support on a curved face is not "
                                  "axis-aligned; put supports on flat sides")
+
+    def _check_interval(self, part: BoundaryPart, x0: float, x1: float, far: float) -> None:
+        """A part's interval must lie on its side: an x interval within the body's x range on
+        ``face``/``far``, a y interval between the face and the far side on ``left``/``right``
+        (a load off its side would silently act on nothing)."""
+        if part.on in ("face", "far"):
+            lo, hi, what = x0, x1, "x range"
+        else:
+            ends = (float(self.face.value(x0 if part.on == "left" else x1)), far)
+            lo, hi, what = min(ends), max(ends), f"{part.on} side's y range"
+        tol = 1e-9 * (hi - lo)  # rounding of values the user copied from the body's own numbers
+        a, b = part.interval
+        if a < lo - tol or b > hi + tol:
+            raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} has interval [{a:g}, {b:g}] "
+                             f"outside its side ({what} [{lo:g}, {hi:g}]); give an interval on the side")
 
     @property
     def sign(self) -> float:
@@ -152,6 +178,9 @@ class ExactSpec:
             if self.stress is None or isinstance(self.stress, str) or len(self.stress) != 3:
                 raise SceneError("exact field 'uniform' needs stress = [s11, s22, s12]")
             object.__setattr__(self, "stress", tuple(number(v, "exact field stress") for v in self.stress))
+            if not any(self.stress):
+                raise SceneError("exact field 'uniform' with zero stress: errors relative to it are undefined; "
+                                 "give a nonzero stress or drop the [exact] table")
         elif self.kind == "hertz":
             for name in ("R", "load"):
                 v = getattr(self, name)
@@ -159,7 +188,7 @@ class ExactSpec:
                     raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
-            raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {self.kind!r}")
+            raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {short(self.kind)}")
         object.__setattr__(self, "xc", number(self.xc, "exact field xc"))
 
 
@@ -176,12 +205,12 @@ class MeshSpec:
     def __post_init__(self):
         integer(self.columns, "mesh columns", minimum=1)
         if not number(self.grading, "mesh grading") >= 1:
-            raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {self.grading!r}")
+            raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {short(self.grading)}")
         integer(self.default_level, "mesh default_level", minimum=0)
         if self.focus is not None:
             lo, hi = pair(self.focus, "mesh focus")
             if not lo <= hi:
-                raise SceneError(f"mesh focus must have lo <= hi, got {self.focus}")
+                raise SceneError(f"mesh focus must have lo <= hi, got {short(self.focus)}")
             object.__setattr__(self, "focus", (lo, hi))
 
 
@@ -199,6 +228,8 @@ class Scene:
     units: tuple[str, str] = ("m", "Pa")
 
     def __post_init__(self):
+        text(self.name, "scene name")
+        text(self.description, "scene description")
         if len(self.bodies) != 2:
             raise SceneError(f"a scene has exactly two bodies, got {len(self.bodies)}")
         up, lo = self.bodies

@@ -17,7 +17,7 @@ from .errors import SceneError
 from .materials import Material
 from .profiles import profile_from_dict
 from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
-from .validate import integer, number, table
+from .validate import integer, number, short, table, text
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
@@ -35,12 +35,16 @@ def builtin_names() -> list[str]:
 
 def builtin_scenes() -> dict[str, str]:
     """``{name: one-line description}`` of the built-in scenes."""
-    return {n: _read_builtin(n).get("description", "") for n in builtin_names()}
+    return {n: builtin_data(n).get("description", "") for n in builtin_names()}
 
 
-def _read_builtin(name: str) -> dict:
-    if name not in builtin_names():
-        raise SceneError(f"unknown scene {name!r}; built-in scenes: {', '.join(builtin_names())} "
+MAX_DEPTH = 32  # a scene nests about 5 tables deep; far deeper input is refused, not recursed into
+
+
+def builtin_data(name) -> dict:
+    """The raw dict of a built-in scene, as read from its TOML file."""
+    if not isinstance(name, str) or name not in builtin_names():
+        raise SceneError(f"unknown scene {short(name)}; built-in scenes: {', '.join(builtin_names())} "
                          "(or give a path to a .toml file)")
     return tomllib.loads(resources.files("cvxdual.data").joinpath(f"{name}.toml").read_text())
 
@@ -76,15 +80,41 @@ def parse_assignment(text: str) -> dict:
         raise SceneError(f"--set expects KEY=VALUE (e.g. mesh.grading=4), got {text!r}")
     key, value = text.split("=", 1)
     try:
-        v = tomllib.loads(f"v = {value.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
+        v = _toml(f"v = {value.strip()}", "--set value")["v"]
+    except SceneError:
         v = value.strip()  # a bare word is taken as a string
+        if v[:1] in "[{\"'":  # but a broken array, table or string is an error, not a word
+            raise
+    if key.strip() == "base":
+        raise SceneError("--set cannot change 'base'; write base = \"NAME\" in a scene file and pass it with --scene")
     d: dict = v
     for part in reversed(key.strip().split(".")):
         if not part:
-            raise SceneError(f"--set: bad key {key!r}")
+            raise SceneError(f"--set: bad key {short(key)}")
         d = {part: d}
     return d
+
+
+def _toml(source: str, what: str) -> dict:
+    try:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{what} is not valid TOML: {e}") from None
+    except RecursionError:
+        raise SceneError(f"{what} is nested too deeply to be a scene") from None
+    _check_depth(data, what)
+    return data
+
+
+def _check_depth(data, what: str) -> None:
+    """Refuse values nested deeper than :data:`MAX_DEPTH` (without recursing into them)."""
+    level = [data]
+    for _ in range(MAX_DEPTH):
+        level = [v for x in level for v in (x.values() if isinstance(x, dict) else x)
+                 if isinstance(v, (dict, list, tuple))]
+        if not level:
+            return
+    raise SceneError(f"{what} is nested more than {MAX_DEPTH} levels deep; a scene has a few levels of tables")
 
 
 def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | None = None) -> Scene:
@@ -92,24 +122,31 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
     if source is None:
         source = "hertz"
     if isinstance(source, dict):
+        _check_depth(source, "the scene")
         data = source
     elif str(source).endswith(".toml") or Path(str(source)).suffix:
         path = Path(source)
+        where = f"scene file {short(str(path))}"
         if not path.is_file():
-            raise SceneError(f"scene file {str(path)!r} does not exist")
+            raise SceneError(f"{where} does not exist")
         try:
-            data = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise SceneError(f"scene file {str(path)!r} is not valid TOML: {e}") from None
+            data = _toml(path.read_text(encoding="utf-8"), where)
+        except UnicodeDecodeError:
+            raise SceneError(f"{where} is not UTF-8 text; save it as UTF-8 TOML") from None
+        except OSError as e:
+            raise SceneError(f"cannot read {where} ({e.strerror or e}); check its permissions") from None
         data.setdefault("name", path.stem)
     else:
-        data = _read_builtin(str(source))
+        data = builtin_data(str(source))
     data = copy.deepcopy(data)
     while "base" in data:
         base = data.pop("base")
-        data = merge(_read_builtin(str(base)), data)
+        data = merge(builtin_data(base), data)
     for o in overrides or []:
-        data = merge(data, o)
+        _check_depth(o, "an override")
+        if isinstance(o, dict) and "base" in o:
+            raise SceneError("an override cannot change 'base'; start from the other scene instead")
+        data = merge(data, table(o, "an override"))
     return scene_from_dict(data)
 
 
@@ -132,10 +169,10 @@ def _need(d: dict, key: str, where: str):
 
 def scene_from_dict(data: dict) -> Scene:
     _check_keys(data, TOP_KEYS, "scene")
-    plane = data.get("plane", "strain")
+    plane = text(data.get("plane", "strain"), "scene plane")
     units = data.get("units", ["m", "Pa"])
     if not (isinstance(units, list) and len(units) == 2 and all(isinstance(u, str) for u in units)):
-        raise SceneError(f"scene: units must be [length, stress] names, e.g. [\"mm\", \"MPa\"], got {units!r}")
+        raise SceneError(f"scene: units must be [length, stress] names, e.g. [\"mm\", \"MPa\"], got {short(units)}")
     bodies_d = _check_keys(_need(data, "bodies", "scene"), None, "bodies")
     bodies = tuple(_body(name, bd, plane) for name, bd in bodies_d.items())
     contact = _check_keys(data.get("contact", {}), CONTACT_KEYS, "contact")
@@ -143,14 +180,14 @@ def scene_from_dict(data: dict) -> Scene:
     exact = None
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
-        exact = ExactSpec(kind=_need(e, "kind", "exact"), stress=e.get("stress"), R=e.get("R"),
+        exact = ExactSpec(kind=text(_need(e, "kind", "exact"), "exact.kind"), stress=e.get("stress"), R=e.get("R"),
                           load=e.get("load"), xc=e.get("xc", 0.0))
     m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
     mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
                     grading=number(m.get("grading", 1.0), "mesh.grading"),
                     default_level=integer(m.get("default_level", 3), "mesh.default_level"))
-    return Scene(name=str(data.get("name", "scene")), bodies=bodies,
-                 description=str(data.get("description", "")), contact=contact.get("interval"),
+    return Scene(name=text(data.get("name", "scene"), "scene name"), bodies=bodies,
+                 description=text(data.get("description", ""), "scene description"), contact=contact.get("interval"),
                  gap=gap, exact=exact, mesh=mesh, units=tuple(units))
 
 

@@ -93,6 +93,7 @@ class Solution:
             "h": s.mesh.h,
             "h_min": s.mesh.h_min,
             "solver": self.solver.get("solver"),
+            "fallback": self.solver.get("fallback"),
             "status": self.solver.get("status"),
             "iterations": self.solver.get("iterations"),
             "objective": self.objective,
@@ -218,8 +219,12 @@ def check_solution(sol: Solution) -> None:
     if bad:
         txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
         name = str(sol.solver.get("solver"))
-        advice = ("try --solver fast, or a coarser mesh" if name.upper() == "CLARABEL"
-                  else "report it: the active-set result should be exact" if name == "fast"
-                  else "try CLARABEL (interior point) or --solver fast")
-        raise AccuracyError(f"solver {name} returned 'optimal' but the solution fails the accuracy checks "
-                            f"({txt}); {advice}")
+        advice = ({"api": "try solver='fast', or a coarser mesh", "cli": "try --solver fast, or a coarser mesh"}
+                  if name.upper() == "CLARABEL" else
+                  {"api": "the problem is too ill-conditioned for its factorisation; use solver='CLARABEL'",
+                   "cli": "the problem is too ill-conditioned for its factorisation; use --solver CLARABEL"}
+                  if name == "fast" else
+                  {"api": "try solver='CLARABEL' (interior point) or solver='fast'",
+                   "cli": "try --solver CLARABEL (interior point) or --solver fast"})
+        what = f"solver {name} returned 'optimal' but the solution fails the accuracy checks ({txt})"
+        raise AccuracyError(f"{what}; {advice['api']}", cli=f"{what}; {advice['cli']}")

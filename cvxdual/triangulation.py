@@ -56,6 +56,14 @@ def break_points(scene: Scene, body: Body) -> np.ndarray:
     return np.unique(pts)
 
 
+def column_breaks(scene: Scene) -> np.ndarray:
+    """Abscissae every mesh column set must contain: the bodies' stretch ends and the ends of
+    boundary intervals on faces and far sides."""
+    intervals = [v for b in scene.bodies for part in b.boundary
+                 if part.interval is not None and part.on in ("face", "far") for v in part.interval]
+    return np.concatenate([*(break_points(scene, b) for b in scene.bodies), intervals])
+
+
 def stretches(scene: Scene, body: Body) -> list[tuple[float, float, str]]:
     """``(x_start, x_end, kind)`` with kind ``flat``, ``convex`` or ``concave`` for the body."""
     b = break_points(scene, body)
@@ -92,10 +100,7 @@ def discretize(scene: Scene, triangulation: str = "type1", level: int | None = N
     node pairs ``(tied, master)`` or ``None``."""
     tri = check_triangulation(triangulation)
     level = check_level(scene.mesh.default_level if level is None else level)
-    intervals = [v for b in scene.bodies for part in b.boundary
-                 if part.interval is not None and part.on in ("face", "far") for v in part.interval]
-    extra = np.concatenate([*(break_points(scene, b) for b in scene.bodies), intervals])
-    cols = column_abscissae(scene, level, extra)
+    cols = column_abscissae(scene, level, column_breaks(scene))
     polygons: list[list] = [[], []]
     face_y = [None, None]
     if tri == "type2":

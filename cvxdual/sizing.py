@@ -1,0 +1,136 @@
+"""Size estimates before allocation: a run that will not fit in memory is refused up front,
+with the estimate and how to override it, instead of dying in an allocation or an OOM kill.
+
+The mesh is counted without being built (:func:`~cvxdual.mesh.mesh_size`), and memory is
+``BASE + triangles * cost`` with per-triangle costs measured as peak resident memory of whole
+solves (``studies/memory.py`` measures them again and compares with this estimate, in
+``reports/memory.md``). The estimate is for Clarabel and the fast path; first-order and dense
+CVXPY solvers can need much more, so for them it is a lower bound.
+
+The limit is the memory available to this process (the smallest of the system's available
+memory, a cgroup limit and an address-space rlimit), or ``max_memory`` / the environment
+variable ``CVXDUAL_MAX_MEMORY`` (``"64GB"``, ``"none"``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import resource
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import TooLargeError
+from .mesh import mesh_size
+from .triangulation import column_breaks
+
+BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)
+# Peak resident bytes per mesh triangle, measured on hertz at levels 2-6 (studies/memory.py),
+# rounded up: the CVXPY path with Clarabel (9 kB at level 3 growing to 11 kB at level 6), the
+# fast path, and on top of the P0 fast solve the equilibrium space by the fast route or by
+# CVXPY with Clarabel (85 kB).
+BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 40e3, "eq_cvxpy": 100e3}
+ENV = "CVXDUAL_MAX_MEMORY"
+_UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
+          "TIB": 2**40}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The size of one run, estimated before anything is built."""
+
+    triangles: float
+    nodes: float
+    bytes: float
+
+    def describe(self) -> str:
+        return f"about {_count(self.triangles)} triangles, {_count(2 * self.nodes)} dofs, {_bytes(self.bytes)}"
+
+
+def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False) -> Estimate:
+    """Estimated triangles, nodes and peak memory of solving ``scene`` at ``level``."""
+    n = mesh_size(scene, level, column_breaks(scene))
+    cost = BYTES_PER_TRIANGLE["fast" if fast or stress_space == "eq" else "cvxpy"]
+    if stress_space == "eq" and not fast:
+        cost += BYTES_PER_TRIANGLE["eq_cvxpy"]
+    elif stress_space == "eq" or bounds:  # bounds of a P0 run: the equilibrium stresses by the fast route
+        cost += BYTES_PER_TRIANGLE["eq"]
+    return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
+
+
+def parse_size(value) -> float:
+    """Bytes from ``1e9``, ``"16GB"``, ``"500 MiB"``; ``None``/``"none"``/``inf``: no limit."""
+    if value is None:
+        return math.inf
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if value > 0:
+            return float(value)
+    elif isinstance(value, str):
+        text = value.strip().upper()
+        if text in ("NONE", "INF", "UNLIMITED"):
+            return math.inf
+        m = re.fullmatch(r"([0-9]*\.?[0-9]+(?:E[+-]?[0-9]+)?)\s*([KMGT]I?B|B)?", text)
+        if m and float(m.group(1)) > 0:
+            return float(m.group(1)) * _UNITS[m.group(2) or ""]
+    raise TooLargeError(f"a memory limit must be a positive size such as 16GB or 500MB, or 'none'; got {value!r:.60}")
+
+
+def available_memory() -> float:
+    """Bytes this process can still allocate: the smallest of MemAvailable, the cgroup's
+    remaining limit and the address-space rlimit's headroom (``inf`` where none is known)."""
+    out = [math.inf]
+    try:
+        info = dict(line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines())
+        out.append(float(info["MemAvailable"].split()[0]) * 1024)
+    except (OSError, KeyError, ValueError):
+        pass
+    try:
+        cg = Path("/sys/fs/cgroup")
+        limit = (cg / "memory.max").read_text().strip()
+        if limit != "max":
+            out.append(float(limit) - float((cg / "memory.current").read_text()))
+    except (OSError, ValueError):
+        pass
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        try:
+            vm = next(line for line in Path("/proc/self/status").read_text().splitlines() if line.startswith("VmSize"))
+            out.append(soft - float(vm.split()[1]) * 1024)
+        except (OSError, StopIteration, ValueError):
+            out.append(float(soft))
+    return max(min(out), 0.0)
+
+
+def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False,
+               max_memory=None) -> Estimate:
+    """The :func:`estimate`, or :class:`~cvxdual.errors.TooLargeError` if it exceeds the limit."""
+    est = estimate(scene, level, fast, stress_space, bounds)
+    given = max_memory if max_memory is not None else os.environ.get(ENV)
+    limit = parse_size(given) if given is not None else available_memory()
+    if est.bytes > limit:
+        where = "the given limit" if given is not None else "the memory available"
+        lower = _largest_level(scene, level, fast, stress_space, bounds, limit)
+        what = f"{scene.name!r:.40} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"
+        if lower is None:
+            what += "; even level 0 is too large: give the scene fewer mesh columns or layers"
+        else:
+            what += f"; level {lower} fits"
+        raise TooLargeError(f"{what}; lower the level or raise the limit with max_memory='64GB' (or {ENV})",
+                            cli=f"{what}; lower --level or raise the limit with --max-memory 64GB")
+    return est
+
+
+def _largest_level(scene, level, fast, stress_space, bounds, limit) -> int | None:
+    fits = [L for L in range(min(level, 12)) if estimate(scene, L, fast, stress_space, bounds).bytes <= limit]
+    return max(fits) if fits else None
+
+
+def _count(n: float) -> str:
+    return f"{n:.3g}" if n < 1e6 or not math.isfinite(n) else f"{n / 1e6:.3g}M" if n < 1e9 else f"{n:.2e}"
+
+
+def _bytes(b: float) -> str:
+    if not math.isfinite(b):
+        return "unbounded memory"
+    return f"{b / 1e9:.3g} GB" if b >= 1e9 else f"{b / 1e6:.3g} MB"
