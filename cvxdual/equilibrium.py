@@ -444,7 +444,7 @@ def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray,
     return y, rel
 
 
-def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 8) -> tuple[np.ndarray, int]:
+def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30) -> tuple[np.ndarray, int]:
     """Least-change correction of the non-contact parameters so that ``div sigma + F = 0``
     holds to rounding, contact parameters held fixed: iterated Tikhonov
     ``dy = B^T (B B^T + mu I)^-1 r`` (one sparse factorisation). ``B`` has dependent rows
@@ -457,19 +457,23 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 8) 
     Br = B[:, rest].tocsr()
     rhs = space.div_rhs - space.div @ space.sigma0 - B[:, ci] @ y[ci]
     BB = (Br @ Br.T).tocsc()
-    mu = 1e-10 * float(BB.diagonal().max())
+    # Each step shrinks a residual component of eigenvalue lam by mu / (lam + mu): mu must be far
+    # below the small eigenvalues of tiny elements (1e-10 left 1e-7 residuals on a mesh with a
+    # 0.02-wide column), and only large enough to factorise along the dependent rows.
+    mu = 1e-14 * float(BB.diagonal().max())
     # SPD (mu > 0): Cholesky through Pardiso where available, 10x SuperLU's LU at level 4
     lu = SPDFactor((BB + mu * sp.identity(BB.shape[0], format="csr")).tocsr())
     y = y.copy()
     x = y[rest]
     tol = 1e-15 * max(float(np.abs(rhs).max()), space.scales.stress)
-    done = 0
+    done, last = 0, np.inf
     while done < iters:
         r = rhs - Br @ x
-        if np.abs(r).max() <= tol:
+        size = float(np.abs(r).max())
+        if size <= tol or size > 0.5 * last:  # at rounding, or stalled there
             break
         x = x + Br.T @ lu.solve(r)
-        done += 1
+        done, last = done + 1, size
     lu.close()
     y[rest] = x
     return y, done
