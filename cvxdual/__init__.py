@@ -35,7 +35,7 @@ __version__ = "0.1.0"
 __all__ = [
     "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",
     "MeshError", "MeshSpec", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
-    "SceneError", "Solution", "SolverError", "TooLargeError", "System", "Traction", "UnbalancedLoadError",
+    "SceneError", "Solution", "SolverError", "System", "TooLargeError", "Traction", "UnbalancedLoadError",
     "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize",
     "exact_field", "load_scene", "recover", "solve",
 ]

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 from .errors import CvxdualError
+from .validate import one_line
 
 MAX_MESSAGE = 400  # characters of an error line: a sentence, never a dump of the input
 
@@ -138,19 +139,15 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             print("cvxdual: interrupted", file=sys.stderr)
             return 130
-    for text in dict.fromkeys(_one_line(str(w.message)) for w in caught):  # a run that worked: its warnings, once
+    # a run that worked: its warnings, each once
+    for text in dict.fromkeys(one_line(w.message, MAX_MESSAGE) for w in caught):
         print(f"cvxdual: warning: {text}", file=sys.stderr)
     return status
 
 
-def _one_line(text: str, limit: int = MAX_MESSAGE) -> str:
-    text = " ".join(text.split())
-    return text if len(text) <= limit else text[: limit - 4] + " ..."
-
-
 def _fail(message: str) -> int:
     """One line on stderr and exit status 1 (warnings that led up to the error are dropped)."""
-    print(f"cvxdual: error: {_one_line(message)}", file=sys.stderr)
+    print(f"cvxdual: error: {one_line(message, MAX_MESSAGE)}", file=sys.stderr)
     return 1
 
 

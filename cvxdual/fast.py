@@ -80,7 +80,7 @@ class ActiveSet:
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)
         self.anchored[s.anchors] = True
-        self.stats = {"iterations": 0, "factorizations": 0, "schur_updates": 0, "max_update": 0}
+        self.stats = {"iterations": 0, "factorizations": 0, "schur_updates": 0, "max_update": 0, "refinements": 0}
 
     def apply_k(self, r: np.ndarray) -> np.ndarray:
         s = self.system
@@ -136,13 +136,14 @@ class ActiveSet:
         self.stats["max_update"] = max(self.stats["max_update"], M.shape[1])
         return r
 
-    def _refine(self, base: _Base, rel: np.ndarray, add: np.ndarray, A: np.ndarray, r: np.ndarray) -> np.ndarray:
+    def _refine(self, base: _Base, rel: np.ndarray, add: np.ndarray, A: np.ndarray, r: np.ndarray,
+                scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Iterative refinement of ``r`` for the active set ``A``: the residual of the
         equilibrium rows (the two rows of an active pair summed: its force is unknown) and of
         the active gaps is solved again with the same factor, while that reduces it. An
-        ill-conditioned ``K`` (extreme materials or shapes) loses digits in one solve."""
+        ill-conditioned ``K`` (extreme materials or shapes) loses digits in one solve.
+        Returns ``r`` and its residual ``g - K r`` (whose pair rows are the contact forces)."""
         s = self.system
-        scale = max(float(np.abs(self.g).max()), 1e-300)
 
         def residual(r):
             res = self.g - self.apply_k(r)
@@ -162,8 +163,8 @@ class ActiveSet:
             if not size_new < 0.5 * size:  # stalls: the factor has nothing more to give
                 break
             r, res, size, gap = r_new, res_new, size_new, gap_new
-            self.stats["refinements"] = self.stats.get("refinements", 0) + 1
-        return r
+            self.stats["refinements"] += 1
+        return r, res
 
     def initial(self) -> np.ndarray:
         """Cold start: the pairs at the smallest gap (the first to touch)."""
@@ -207,8 +208,8 @@ class ActiveSet:
                 base = _Base(self, A)
                 self.stats["factorizations"] += 1
                 rel = add = np.empty(0, int)
-            r = self._refine(base, rel, add, A, self._solve(base, rel, add))
-            force = (self.g - self.apply_k(r))[s.jb]
+            r, res = self._refine(base, rel, add, A, self._solve(base, rel, add), fscale)
+            force = res[s.jb]
             force[~A] = 0.0
             opening = s.eps - (r[s.jb] - r[s.ja])
             # rounding-level forces and penetrations do not change the set (avoids cycling
@@ -219,8 +220,8 @@ class ActiveSet:
                 return r, force, A
             key = new.tobytes()
             if key in seen:
-                raise SolverError("fast path: the active set cycles; use the CVXPY path (solver='CLARABEL')",
-                                  cli="fast path: the active set cycles; use the CVXPY path (--solver CLARABEL)")
+                what = "fast path: the active set cycles; use the CVXPY path"
+                raise SolverError(f"{what} (solver='CLARABEL')", cli=f"{what} (--solver CLARABEL)")
             seen.add(key)
             A = new
         what = f"fast path: no convergence in {MAX_ITER} active-set iterations; use the CVXPY path"

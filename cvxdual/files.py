@@ -88,6 +88,7 @@ def _load_renameat2():
 
 _RENAMEAT2 = _load_renameat2()
 _RENAME_EXCHANGE = 2
+HAS_EXCHANGE = _RENAMEAT2 is not None  # the atomic swap is available (else two renames)
 
 
 def exchange(dirfd: int, a: str, b: str) -> bool:

@@ -74,14 +74,19 @@ def _stretches(x0, x1, n0, focus, ratio, required):
     return brk, xib, counts, (xs, xi)
 
 
+def _required(scene: Scene, extra) -> list:
+    """The break points of the global columns: body ends, the contact interval's ends, the
+    focus ends and ``extra``."""
+    return [*(v for b in scene.bodies for v in b.x_range), *scene.contact, *(scene.mesh.focus or ()), *extra]
+
+
 def mesh_size(scene: Scene, level: int, extra=()) -> dict:
     """Triangles and nodes of the mesh of ``scene`` at ``level`` with the break points ``extra``
     (as :func:`column_abscissae`), counted without building it (floats: a hostile level must
     give a huge count, not an allocation or an overflow)."""
     x0, x1 = scene.x_extent
     spec = scene.mesh
-    required = [*(v for b in scene.bodies for v in b.x_range), *scene.contact, *(spec.focus or ()), *extra]
-    brk, _, counts, _ = _stretches(x0, x1, spec.columns, spec.focus, spec.grading, required)
+    brk, _, counts, _ = _stretches(x0, x1, spec.columns, spec.focus, spec.grading, _required(scene, extra))
     scale = 2.0**level if level < 1000 else np.inf  # a hostile level: an infinite count, not an error
     n_tri = n_nodes = 0.0
     for body in scene.bodies:
@@ -191,14 +196,11 @@ class Mesh:
 
 
 def column_abscissae(scene: Scene, level: int, extra=()) -> np.ndarray:
-    """The global columns: graded over the union of the bodies' x ranges, with body ends, the
-    contact interval's ends, the focus ends and ``extra`` points as break points."""
+    """The global columns: graded over the union of the bodies' x ranges, with the break points
+    of :func:`_required`."""
     x0, x1 = scene.x_extent
     spec = scene.mesh
-    required = [*(v for b in scene.bodies for v in b.x_range), *scene.contact, *extra]
-    if spec.focus is not None:
-        required += list(spec.focus)
-    return graded_points(x0, x1, spec.columns, level, spec.focus, spec.grading, required)
+    return graded_points(x0, x1, spec.columns, level, spec.focus, spec.grading, _required(scene, extra))
 
 
 def check_level(level) -> int:

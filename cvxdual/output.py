@@ -20,6 +20,7 @@ from .errors import OutputError
 from .files import json_text, replace_dir, staged_dir, temp_beside
 from .locate import nearest_node_values
 from .pieces import piece_outlines
+from .validate import short
 
 SET_FILES = ("summary.json", "contact.csv", "solution.vtu", "stress.png", "deformed.png", "pressure.png",
              "bounds.png")
@@ -56,9 +57,9 @@ def foreign_entries(out: str | Path) -> list[str]:
 def _check_owned(out: Path, shown: str) -> None:
     bad = foreign_entries(out)
     if bad:
-        short = [repr(b if len(b) <= 30 else b[:27] + "...") for b in bad[:3]]
+        names = [short(b, 30) for b in bad[:3]]
         more = f" and {len(bad) - 3} more" if len(bad) > 3 else ""
-        raise OutputError(f"refusing to write outputs to {shown!r}: it holds {', '.join(short)}{more}, not written "
+        raise OutputError(f"refusing to write outputs to {shown!r}: it holds {', '.join(names)}{more}, not written "
                           "by cvxdual, and the output directory is replaced whole; nothing was changed there; "
                           "choose an empty or cvxdual-written --out")
 

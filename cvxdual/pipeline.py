@@ -23,6 +23,7 @@ from .sizing import check_size
 from .solution import Solution, check_solution, evaluate
 from .solvers import DEFAULT_SOLVER, FAST, resolve_solver
 from .triangulation import check_triangulation, discretize
+from .validate import one_line, short
 
 STRESS_SPACES = ("p0", "eq")  # the paper's piecewise-constant stresses; equilibrium (docs/equilibrium.md)
 
@@ -91,7 +92,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
             if solver != FAST or not fallback:
                 raise
             # the fast path failed where the CVXPY path may not: hand over, and say so
-            reason = " ".join(str(e).split())[:300]
+            reason = one_line(e, 300)
             try:
                 check_size(scene, level, False, stress_space, bounds, max_memory)
                 sol = run(scene, triangulation, level, DEFAULT_SOLVER, check, warm_start, bounds)
@@ -101,9 +102,9 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
             return replace(sol, solver={**sol.solver, "fallback": f"fast path failed ({reason}); "
                                         f"solved by {DEFAULT_SOLVER}"})
     except MemoryError:
-        raise TooLargeError(f"ran out of memory solving {scene.name!r:.40} at level {level}; lower the level or "
-                            "free memory", cli=f"ran out of memory solving {scene.name!r:.40} at level {level}; "
-                            "lower --level or free memory") from None
+        what = f"ran out of memory solving {short(scene.name, 40)} at level {level}"
+        raise TooLargeError(f"{what}; lower the level or free memory",
+                            cli=f"{what}; lower --level or free memory") from None
 
 
 def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool, warm_start: bool,

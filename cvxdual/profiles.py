@@ -59,8 +59,8 @@ class Profile:
         return np.empty(0)
 
     def count_inflexions(self, x0: float, x1: float) -> float:
-        """How many :meth:`inflexions` there are, without listing them (a hostile profile may
-        have billions)."""
+        """How many :meth:`inflexions` there are at most, without listing them (a hostile
+        profile may have billions); the mesh size estimate counts with it."""
         return float(len(self.inflexions(x0, x1)))
 
     def domain(self) -> tuple[float, float]:

@@ -186,9 +186,8 @@ def scene_from_dict(data: dict) -> Scene:
     mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
                     grading=number(m.get("grading", 1.0), "mesh.grading"),
                     default_level=integer(m.get("default_level", 3), "mesh.default_level"))
-    return Scene(name=text(data.get("name", "scene"), "scene name"), bodies=bodies,
-                 description=text(data.get("description", ""), "scene description"), contact=contact.get("interval"),
-                 gap=gap, exact=exact, mesh=mesh, units=tuple(units))
+    return Scene(name=data.get("name", "scene"), bodies=bodies, description=data.get("description", ""),
+                 contact=contact.get("interval"), gap=gap, exact=exact, mesh=mesh, units=tuple(units))  # Scene checks
 
 
 def _body(name: str, d: dict, plane: str) -> Body:

@@ -24,12 +24,12 @@ from pathlib import Path
 from .errors import TooLargeError
 from .mesh import mesh_size
 from .triangulation import column_breaks
+from .validate import short
 
 BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)
 # Peak resident bytes per mesh triangle, measured on hertz at levels 2-6 (studies/memory.py),
-# rounded up: the CVXPY path with Clarabel (9 kB at level 3 growing to 11 kB at level 6), the
-# fast path, and on top of the P0 fast solve the equilibrium space by the fast route or by
-# CVXPY with Clarabel (85 kB).
+# rounded up. "cvxpy": the P0 dual through CVXPY and Clarabel; "fast": the P0 fast path; on top
+# of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy").
 BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 40e3, "eq_cvxpy": 100e3}
 ENV = "CVXDUAL_MAX_MEMORY"
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
@@ -73,7 +73,7 @@ def parse_size(value) -> float:
         m = re.fullmatch(r"([0-9]*\.?[0-9]+(?:E[+-]?[0-9]+)?)\s*([KMGT]I?B|B)?", text)
         if m and float(m.group(1)) > 0:
             return float(m.group(1)) * _UNITS[m.group(2) or ""]
-    raise TooLargeError(f"a memory limit must be a positive size such as 16GB or 500MB, or 'none'; got {value!r:.60}")
+    raise TooLargeError(f"a memory limit must be a positive size such as 16GB or 500MB, or 'none'; got {short(value)}")
 
 
 def available_memory() -> float:
@@ -111,7 +111,7 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
     if est.bytes > limit:
         where = "the given limit" if given is not None else "the memory available"
         lower = _largest_level(scene, level, fast, stress_space, bounds, limit)
-        what = f"{scene.name!r:.40} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"
+        what = f"{short(scene.name, 40)} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"
         if lower is None:
             what += "; even level 0 is too large: give the scene fewer mesh columns or layers"
         else:
@@ -119,6 +119,20 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
         raise TooLargeError(f"{what}; lower the level or raise the limit with max_memory='64GB' (or {ENV})",
                             cli=f"{what}; lower --level or raise the limit with --max-memory 64GB")
     return est
+
+
+def peak_mb() -> float:
+    """This process's peak resident memory in MB. On Linux ``VmHWM`` of its own address space:
+    ``ru_maxrss`` also carries the parent's peak across ``exec`` (a worker that once held a
+    9 GB reference made every case it launched report 9 GB)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
 def _largest_level(scene, level, fast, stress_space, bounds, limit) -> int | None:

@@ -213,8 +213,13 @@ def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict) -> dict:
             "error": stress_error(system, t, exact.stress) if exact is not None else None}
 
 
+def tolerances(sol: Solution) -> dict:
+    """The residual tolerances ``sol`` promises (its stress space's)."""
+    return EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
+
+
 def check_solution(sol: Solution) -> None:
-    tol = EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
+    tol = tolerances(sol)
     bad = {k: v for k, v in sol.residuals.items() if k in tol and v > tol[k]}
     if bad:
         txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())

@@ -7,6 +7,7 @@ import time
 import cvxpy as cp
 
 from .errors import SolverError, UnknownSolverError
+from .validate import one_line
 
 DEFAULT_SOLVER = "CLARABEL"
 FAST = "FAST"  # the active-set path of cvxdual.fast, not a CVXPY solver
@@ -59,7 +60,7 @@ def solve_problem(problem: cp.Problem, solver: str, what: str, **options) -> dic
         raise SolverError(f"{what}: solver {solver} failed ({str(e).splitlines()[0] if str(e) else 'no message'}); "
                           "try another solver (e.g. CLARABEL) or a coarser mesh") from None
     except (TypeError, ValueError) as e:  # solvers reject unknown or ill-typed options this way
-        msg = " ".join(str(e).split())[:200]
+        msg = one_line(e, 200)
         raise SolverError(f"{what}: solver {solver} rejected the options {sorted(options)} ({msg}); "
                           "check their names and types in the solver's documentation") from None
     wall = time.perf_counter() - t0

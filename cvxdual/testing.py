@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .solution import EQ_TOLERANCES, TOLERANCES
+from .solution import tolerances
 
 HOSTILE = (0, 0.0, -1.0, 1e308, -1e308, 1e-320, math.nan, math.inf, -math.inf, 10**400, -(10**400),
            "abc", "", "1e3", True, False, None, [], [1.0, 2.0], {}, {"kind": "flat"})
@@ -238,8 +238,7 @@ def check_result(sol) -> list[str]:
             problems.append(f"summary {key} = {v}")
     if sol.solver.get("status") != "optimal":
         problems.append(f"status {sol.solver.get('status')!r}")
-    tol = EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
-    for k, t in tol.items():
+    for k, t in tolerances(sol).items():
         v = sol.residuals.get(k)
         if not (_is_number(v) or isinstance(v, np.floating)) or not v <= t:
             problems.append(f"residual {k} = {v} (tolerance {t:g})")

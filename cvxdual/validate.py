@@ -19,6 +19,12 @@ TINY = 1e-100  # and far above its underflow (2.2e-308)
 MAX_SHOWN = 60  # characters of a value echoed in a message
 
 
+def one_line(text: str, limit: int) -> str:
+    """``text`` with its whitespace runs collapsed, cut to ``limit`` characters."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 4] + " ..."
+
+
 def short(value, limit: int = MAX_SHOWN) -> str:
     """``repr(value)`` cut to ``limit`` characters, so a message stays one readable line."""
     try:
@@ -27,7 +33,7 @@ def short(value, limit: int = MAX_SHOWN) -> str:
         text = f"<deeply nested {type(value).__name__}>"
     except Exception:  # noqa: BLE001 - a failing __repr__ must not replace the real error
         text = f"<{type(value).__name__}>"
-    return text if len(text) <= limit else text[: limit - 4] + " ..."
+    return one_line(text, limit)
 
 
 def number(value, what: str) -> float:
@@ -45,15 +51,13 @@ def number(value, what: str) -> float:
     return v
 
 
-def integer(value, what: str, minimum: int | None = None, maximum: int | None = None) -> int:
+def integer(value, what: str, minimum: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise SceneError(f"{what} must be an integer, got {short(value)}")
     if abs(value) > HUGE:
         raise SceneError(f"{what} must be an integer of magnitude at most {HUGE:g}, got {short(value)}")
     if minimum is not None and value < minimum:
         raise SceneError(f"{what} must be at least {minimum}, got {short(value)}")
-    if maximum is not None and value > maximum:
-        raise SceneError(f"{what} must be at most {maximum}, got {short(value)}")
     return int(value)
 
 

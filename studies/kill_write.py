@@ -131,7 +131,7 @@ def main(argv=None) -> int:
         print(rows[-1], flush=True)
     shutil.rmtree(args.work)
 
-    swap = "renameat2(RENAME_EXCHANGE)" if files._RENAMEAT2 is not None else "two renames (fallback)"
+    swap = "renameat2(RENAME_EXCHANGE)" if files.HAS_EXCHANGE else "two renames (fallback)"
     text = "\n".join([
         "# Output sets under `kill -9`",
         "",

@@ -116,6 +116,11 @@ def has_shapes(arrays: dict, shapes: dict) -> bool:
     return True
 
 
+def is_key(key) -> bool:
+    """A content key as the cache writes them: ASCII letters and digits only (never a path)."""
+    return isinstance(key, str) and key.isascii() and key.isalnum()
+
+
 class Cache:
     """Rows and arrays under ``root`` (``None``: nothing is cached)."""
 
@@ -125,7 +130,7 @@ class Cache:
     def _path(self, kind: str, key: str, suffix: str) -> Path | None:
         if self.root is None:
             return None
-        if not (isinstance(key, str) and key.isascii() and key.isalnum()):
+        if not is_key(key):
             raise ValueError(f"bad cache key {key!r}")
         return self.root / kind / f"{key}{suffix}"
 

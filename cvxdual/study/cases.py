@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -28,7 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CvxdualError
-from .cache import Cache, code_version, content_key
+from ..sizing import peak_mb
+from ..validate import one_line
+from .cache import Cache, code_version, content_key, is_key
 from .spec import Case, Reference, StudyError, load_module
 
 EDGE_RADIUS = 0.1  # times a: the discs around the Hertz contact edges (0.03% of the hertz domain)
@@ -78,7 +79,7 @@ def load_case_row(cache: Cache, key: str, case: Case) -> dict | None:
 
 def load_saved_stress(cache: Cache, key: str, n_pieces) -> dict | None:
     """A case's saved ``stress`` ``(n_pieces, 3)`` and piece ``area`` ``(n_pieces,)``, or ``None``."""
-    if not (type(n_pieces) is int and isinstance(key, str) and key.isascii() and key.isalnum()):
+    if not (type(n_pieces) is int and is_key(key)):
         return None
     return cache.get_arrays(key, {"stress": (n_pieces, 3), "area": (n_pieces,)})
 
@@ -240,9 +241,9 @@ def compute_row(case: Case, ref_info: dict | None, cache_root: str | None, key: 
     try:
         row.update(_compute(case, ref_info, Cache(cache_root), key))
     except CvxdualError as e:
-        row["status"] = f"failed: {type(e).__name__}: {' '.join(str(e).split())}"[:300]
+        row["status"] = one_line(f"failed: {type(e).__name__}: {e}", 300)
     except Exception as e:  # noqa: BLE001 - any failure of one case is a row, not a dead study
-        row["status"] = f"failed: {type(e).__name__}: {' '.join(str(e).split())}"[:300]
+        row["status"] = one_line(f"failed: {type(e).__name__}: {e}", 300)
         row["_transient"] = True
     row.setdefault("t_total", time.perf_counter() - t0)
     row["finished"] = now()
@@ -380,20 +381,6 @@ def now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
-def peak_mb() -> float:
-    """This process's peak resident memory in MB. On Linux ``VmHWM`` of its own address space:
-    ``ru_maxrss`` also carries the parent's peak across ``exec`` (a worker that once held a
-    9 GB reference made every case it launched report 9 GB)."""
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0  # kB
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
-
-
 def _run_isolated(case: Case, ref_info, cache_root, key) -> dict:
     """The case in a fresh interpreter: a clean peak memory, and a time limit."""
     payload = json.dumps({"case": case.to_json(), "ref_info": ref_info, "cache": cache_root, "key": key})
@@ -407,7 +394,7 @@ def _run_isolated(case: Case, ref_info, cache_root, key) -> dict:
     if p.returncode != 0:
         last = (p.stderr.strip().splitlines() or ["no output"])[-1]
         what = "killed" if p.returncode < 0 else "failed"
-        return {**base_row(case), "status": f"{what}: exit {p.returncode}: {last}"[:300], "started": t0,
+        return {**base_row(case), "status": one_line(f"{what}: exit {p.returncode}: {last}", 300), "started": t0,
                 "finished": now(), "_transient": True}
     return json.loads(p.stdout.strip().splitlines()[-1])
 

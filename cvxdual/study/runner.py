@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..norms import VOIGT_WEIGHT
+from ..validate import one_line
 from .cache import Cache
 from .cases import (
     REQUIRED,
@@ -290,8 +291,7 @@ def _result_row(f, case, cancelled_error) -> dict:
     except cancelled_error:
         return {**base_row(case), "status": "killed: cancelled (the scheduler lost the case)", "worker": ""}
     except Exception as e:  # noqa: BLE001 - e.g. the reference of this case failed
-        msg = " ".join(str(e).split())
-        return {**base_row(case), "status": f"failed: {type(e).__name__}: {msg}"[:300], "worker": "",
+        return {**base_row(case), "status": one_line(f"failed: {type(e).__name__}: {e}", 300), "worker": "",
                 "_transient": not isinstance(e, StudyError)}
 
 
