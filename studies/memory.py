@@ -4,7 +4,7 @@ reports/memory.md and reports/memory.csv.
     python studies/memory.py                 # hertz and the curved scenes, levels 3-6
     python studies/memory.py --quick         # levels 2-3 only, into out/memory-quick
 
-Each case runs in a fresh interpreter (peak resident memory, ``ru_maxrss``, is a high-water
+Each case runs in a fresh interpreter (peak resident memory, ``VmHWM``, is a high-water
 mark: a worker that ran other cases first would report theirs), so this study does not use
 the Dask runner. The estimate is what ``solve`` checks before allocating; the ratio
 ``measured / estimated`` should stay below 1 (an estimate that errs on the safe side).
@@ -24,11 +24,12 @@ from cvxdual.sizing import estimate
 from cvxdual.study.report import md_table
 
 CHILD = r"""
-import json, resource, sys
+import json, sys
 import cvxdual as cd
+from cvxdual.sizing import peak_mb
 scene, tri, level, solver, space = sys.argv[1:6]
 sol = cd.solve(scene, tri, int(level), solver, stress_space=space, max_memory="none")
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = peak_mb() * 2**20  # VmHWM: ru_maxrss would carry this study's own peak across exec
 print(json.dumps({"triangles": len(sol.mesh.triangles()), "peak": peak}))
 """
 
