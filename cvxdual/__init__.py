@@ -7,7 +7,6 @@ Names from the paper are used where they help a reader holding it: ``lam`` (stre
 """
 
 from .assembly import System, assemble
-from .dual import DualModel
 from .errors import (
                      AccuracyError,
                      CvxdualError,
@@ -24,13 +23,22 @@ from .exact import exact_field
 from .materials import Material
 from .mesh import build_mesh
 from .pipeline import build_model, build_system, recover, solve
-from .primal import PrimalModel
 from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
 from .scenefile import builtin_scenes, load_scene
 from .solution import Solution
 from .triangulation import discretize
 
 __version__ = "0.1.0"
+
+# the CVXPY models load CVXPY (0.3 s): on first use, so that the fast path never pays for it
+_LAZY = {"DualModel": ".dual", "PrimalModel": ".primal"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",

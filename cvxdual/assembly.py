@@ -138,11 +138,17 @@ def stress_operators(mesh: Mesh, pieces: Pieces) -> tuple[sp.csr_matrix, sp.csr_
     """``E`` (column block ``P`` is ``|P| B_P^T``), ``A_h`` and the Hooke matrix ``C_P`` of every piece."""
     bodies = mesh.scene.bodies
     n_p = len(pieces)
-    r3 = 3 * np.arange(n_p)[:, None] + np.arange(3)[None, :]
-    E = assemble_blocks(pieces.dofs, r3, pieces.area[:, None, None] * pieces.B.transpose(0, 2, 1),
-                        (2 * mesh.n_nodes, 3 * n_p))
+    # built directly in compressed form (no COO sort and sum: no two pieces share a column):
+    # column 3P + c of E holds |P| B_P[c, :] at the piece's six (distinct) dofs; A_h is block diagonal
+    idx = np.int32 if 3 * n_p < 2**31 - 1 else np.int64
+    cols = lambda k: np.arange(0, k * 3 * n_p + 1, k, dtype=idx)  # noqa: E731 - k entries per column
+    E = sp.csc_matrix(((pieces.area[:, None, None] * pieces.B).reshape(-1),
+                       np.repeat(pieces.dofs, 3, axis=0).astype(idx).reshape(-1), cols(6)),
+                      shape=(2 * mesh.n_nodes, 3 * n_p)).tocsr()
     compliance = np.stack([b.material.compliance for b in bodies])[pieces.body]
-    Ah = assemble_blocks(r3, r3, pieces.area[:, None, None] * compliance, (3 * n_p, 3 * n_p))
+    r3 = np.arange(3 * n_p, dtype=idx).reshape(n_p, 3)
+    Ah = sp.csr_matrix(((pieces.area[:, None, None] * compliance).reshape(-1),  # row-major blocks: CSR as is
+                        np.repeat(r3, 3, axis=0).reshape(-1), cols(3)), shape=(3 * n_p, 3 * n_p))
     C = np.stack([b.material.stiffness for b in bodies])[pieces.body]
     return E, Ah, C
 

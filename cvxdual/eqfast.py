@@ -31,7 +31,7 @@ import scipy.sparse as sp
 
 from .equilibrium import EquilibriumSpace, make_exact, rigid_modes
 from .errors import SolverError
-from .factor import SPDFactor, backend
+from .factor import SPDFactor
 from .fast import transfer_active
 from .jm import MASS0, bary_gradients, divergence_rows, sub_vertices
 
@@ -146,6 +146,7 @@ class HybridSolver:
         self.tri_c = np.flatnonzero(on_face.any(1))
         rest = np.setdiff1d(np.arange(n_T), self.tri_c)
         self.jumps = pair_jumps(space).reshape(len(self.contact), -1)
+        self.backend = None  # of the last factorisation (cvxdual.factor)
         self.stats = {"iterations": 0, "factorizations": 0, "factor_time": 0.0, "n_mu": 0, "nnz": 0}
         self.S_rest, self.f_rest = self.condense(rest, np.zeros(n_y, bool), self.mu_int, self.n_int)
         self.stats["setup_time"] = time.perf_counter() - t0
@@ -262,6 +263,7 @@ class HybridSolver:
         f = np.concatenate([self.f_rest, np.zeros(n_mu - self.n_int)]) + f_c
         t0 = time.perf_counter()
         factor = SPDFactor(S)
+        self.backend = factor.method
         mu = factor.solve(f)
         factor.close()
         self.stats["factor_time"] += time.perf_counter() - t0
@@ -365,7 +367,7 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
     y_exact, post = make_exact(space, y * s)
     t2 = time.perf_counter()
     n_c = len(space.contact_y)
-    info = {"solver": "fast", "status": "optimal", "backend": backend(), **hs.stats,
+    info = {"solver": "fast", "status": "optimal", "backend": hs.backend, **hs.stats,
             "solve_time": t1 - t0, "post_time": t2 - t1, "n_variables": space.n_y,
             "n_equalities": space.div.shape[0], "n_inequalities": 2 * n_c,
             "active": state["active"].reshape(n_c, 2), "objective": hs.objective(y_exact / s),

@@ -1,12 +1,24 @@
-"""Sparse symmetric positive definite factorisation: MKL Pardiso when available, else SuperLU.
+"""Sparse symmetric positive definite factorisation, with the backend chosen by size.
 
-Pardiso (through the ``pypardiso`` package, binary wheels for x86-64) factors the 2D
-elasticity stiffness 4-5 times faster than SciPy's SuperLU with its best ordering, which
-matters for the fast path and for the speed "limit". Where it cannot be imported (other
-platforms), SuperLU with the ``MMD_AT_PLUS_A`` ordering is used.
+Measured on the stiffness of the built-in scenes (reports/speed.md, "Time and memory against
+size"): below a few thousand unknowns SciPy's SuperLU (symmetric mode) factors in 0.2-5 ms with
+no library start-up. Above, CHOLMOD (supernodal Cholesky, through CVXOPT) and MKL Pardiso
+(through ``pypardiso``, x86-64 wheels) are 2-4 times faster than SuperLU; on one thread CHOLMOD
+is 1.4 times faster than Pardiso, on two they are within 10%, so CHOLMOD is preferred. Pardiso is
+imported on first use only, with MKL's runtime named to ``pypardiso`` beforehand: left to itself
+it searches the whole environment for it by a recursive file search (0.1-0.2 s) at import and
+again for every new solver. SuperLU serves every size where neither can be loaded.
+
+:func:`backends` lists every backend that can factor here (QDLDL too, when installed); the
+speed study's "limit" tries them all.
 """
 
 from __future__ import annotations
+
+import functools
+import glob
+import os
+import sys
 
 import numpy as np
 import scipy.sparse as sp
@@ -14,46 +26,72 @@ import scipy.sparse.linalg as spla
 
 from .errors import SolverError
 
-try:  # pragma: no cover - depends on the platform
-    import pypardiso as _pypardiso
-except Exception:  # noqa: BLE001 - any import failure (no wheel, no MKL) means: use SuperLU
-    _pypardiso = None
+# below this many unknowns SuperLU beats CHOLMOD and Pardiso (their set-up and threads cost more
+# than the factorisation itself; level 2 of hertz, 2.4k unknowns: 2.6 ms against 4.2 ms)
+LARGE_FROM = 5000
 
 
-def backend() -> str:
-    return "pardiso" if _pypardiso is not None else "superlu"
+@functools.cache
+def _pypardiso():
+    """The ``pypardiso`` module, or None where it cannot be loaded."""
+    if "PYPARDISO_MKL_RT" not in os.environ:
+        # the pip wheel of MKL puts its runtime here: saves pypardiso's recursive search
+        found = sorted(glob.glob(os.path.join(sys.prefix, "lib", "libmkl_rt.so*")), key=len)
+        if found:
+            os.environ["PYPARDISO_MKL_RT"] = found[0]
+    try:  # pragma: no cover - depends on the platform
+        import pypardiso  # loads MKL (it makes a solver at import): fails here rather than mid-solve
+    except Exception:  # noqa: BLE001 - any import failure (no wheel, no MKL) means: not available
+        return None
+    return pypardiso
 
 
-def _pardiso_solver():
-    """A new Pardiso handle. pypardiso looks for MKL's runtime by a recursive file search on
-    every construction (about 0.3 s); the first found path is remembered in the variable it
-    reads first."""
-    import os
-    ps = _pypardiso.PyPardisoSolver(mtype=2)  # real symmetric positive definite
-    name = getattr(ps.libmkl, "_name", None)
-    if name and "PYPARDISO_MKL_RT" not in os.environ:
-        os.environ["PYPARDISO_MKL_RT"] = name
-    return ps
+@functools.cache
+def _has_cholmod() -> bool:
+    try:
+        import cvxopt.cholmod  # noqa: F401
+    except Exception:  # noqa: BLE001 - not installed or broken: not a backend here
+        return False
+    return True
+
+
+def backend(n: int | None = None) -> str:
+    """The backend used for ``n`` unknowns (the largest systems' choice if ``n`` is None)."""
+    if n is not None and n < LARGE_FROM:
+        return "superlu"
+    if _has_cholmod():
+        return "cholmod"
+    return "pardiso" if _pypardiso() is not None else "superlu"
+
+
+def backends() -> list[str]:
+    """Every backend that can factor on this machine."""
+    out = ["superlu"] + ["cholmod"] * _has_cholmod() + ["pardiso"] * (_pypardiso() is not None)
+    try:
+        import qdldl  # noqa: F401
+        out.append("qdldl")
+    except Exception:  # noqa: BLE001 - not installed or broken: not a backend here
+        pass
+    return out
 
 
 class SPDFactor:
-    """Factor a sparse SPD matrix once; solve for one or many right-hand sides."""
+    """Factor a sparse SPD matrix once; solve for one or many right-hand sides. With ``lower``
+    the matrix given is the lower triangle only (what Cholesky reads; see
+    :func:`cvxdual.sparse.assemble_lower`)."""
 
-    def __init__(self, A: sp.spmatrix, method: str | None = None):
-        method = method or backend()
-        self.method = method
+    def __init__(self, A: sp.spmatrix, method: str | None = None, lower: bool = False):
         self.n = A.shape[0]
+        self.method = method or backend(self.n)
         if self.n == 0:
             return
         try:
-            if method == "pardiso":
-                self._A = sp.triu(A, format="csr")
-                self._A.sort_indices()
-                self._ps = _pardiso_solver()
-                self._ps.factorize(self._A)
-            else:
-                self._lu = spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A")
-        except Exception as e:  # noqa: BLE001 - Pardiso and SuperLU raise their own types
+            L = sp.csr_matrix(A) if lower else sp.tril(A, format="csr")
+            self._solve = _FACTOR[self.method](L, self)
+        except KeyError:
+            raise SolverError(f"unknown factorisation backend {self.method!r}; choose one of "
+                              f"{', '.join(backends())}") from None
+        except Exception as e:  # noqa: BLE001 - every backend raises its own types
             raise SolverError(f"the stiffness matrix could not be factorised ({e}); a body may be free to "
                               "move (add a support) or the active contact set leaves it floating") from None
 
@@ -73,10 +111,55 @@ class SPDFactor:
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self.n == 0:
             return np.zeros_like(b)
-        if self.method == "pardiso":
-            x = self._ps.solve(self._A, np.asarray(b, float))
-        else:
-            x = self._lu.solve(np.asarray(b, float))
+        x = self._solve(np.asarray(b, float))
         if not np.all(np.isfinite(x)):
             raise SolverError("the factorised stiffness gave a non-finite solution; the problem is singular")
         return x
+
+
+# every backend takes the lower triangle L of the matrix
+
+def _full(L):
+    return L + sp.tril(L, -1, format="csr").T
+
+
+def _pardiso(L, owner: SPDFactor):
+    mod = _pypardiso()
+    if mod is None:
+        raise SolverError("Pardiso is not available here (pypardiso and MKL are x86-64 only)")
+    U = L.T.tocsr()  # the upper triangle, as Pardiso's symmetric modes read
+    U.sort_indices()
+    owner._ps = ps = mod.PyPardisoSolver(mtype=2)  # real symmetric positive definite
+    ps.factorize(U)
+    return lambda b: ps.solve(U, b)
+
+
+def _superlu(L, owner: SPDFactor):
+    # symmetric mode with no pivoting: SPD needs none, and the minimum-degree ordering of A + A^T
+    # is kept (0-30 % faster than the default at small sizes)
+    lu = spla.splu(sp.csc_matrix(_full(L)), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                   options={"SymmetricMode": True})
+    return lu.solve
+
+
+def _cholmod(L, owner: SPDFactor):
+    from cvxopt import cholmod, matrix, spmatrix
+    C = L.tocoo()
+    M = spmatrix(matrix(C.data), matrix(C.row.astype(int)), matrix(C.col.astype(int)), L.shape)
+    F = cholmod.symbolic(M)
+    cholmod.numeric(M, F)
+
+    def solve(b):
+        x = matrix(np.array(b, float, order="F").reshape(b.shape[0], -1))
+        cholmod.solve(F, x)
+        return np.array(x).reshape(b.shape)
+    return solve
+
+
+def _qdldl(L, owner: SPDFactor):
+    import qdldl
+    s = qdldl.Solver(L.T.tocsc())
+    return lambda b: np.column_stack([s.solve(c) for c in b.T]) if b.ndim == 2 else s.solve(b)
+
+
+_FACTOR = {"pardiso": _pardiso, "superlu": _superlu, "cholmod": _cholmod, "qdldl": _qdldl}

@@ -19,6 +19,7 @@ coarser level) make the changes few.
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -26,8 +27,8 @@ import scipy.sparse as sp
 
 from .assembly import System
 from .errors import SolverError
-from .factor import SPDFactor, backend
-from .sparse import assemble_blocks
+from .factor import SPDFactor, backends
+from .sparse import assemble_lower
 
 MAX_ITER = 60
 MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactorising
@@ -57,10 +58,12 @@ class _Base:
         self.r_e[s.jb[active]] = s.eps[active]
         rd = ps.rd
         zd = np.where(rd >= 0, self.zidx[np.maximum(rd, 0)], -1)
-        self.K = assemble_blocks(zd, zd, ps.kloc, (self.n_z, self.n_z))
+        self.K_lower = assemble_lower(zd, ps.kloc, self.n_z)  # K_A's lower triangle: Cholesky reads no more
         self.b_r = ps.g - ps.apply_k(self.r_e)  # r-space right-hand side with the gap moved over
         self.rhs = self.project(self.b_r)
-        self.factor = SPDFactor(self.K) if factorize else None
+        self.factor = SPDFactor(self.K_lower, lower=True) if factorize else None
+        self.y0 = None  # the solution of the base's own system, once solved
+        self.solved = {}  # ("rel" | "add", pair) -> the factor's solve of its border column
 
     def project(self, v: np.ndarray) -> np.ndarray:
         """``P0^T v`` for r-space vectors or ``(n_r, m)`` arrays."""
@@ -83,6 +86,7 @@ class ActiveSet:
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)
         self.anchored[s.anchors] = True
+        self.backend = None  # the factorisation backend of the last base (cvxdual.factor)
         self.stats = {"iterations": 0, "factorizations": 0, "schur_updates": 0, "max_update": 0, "refinements": 0}
 
     def apply_k(self, r: np.ndarray) -> np.ndarray:
@@ -104,29 +108,37 @@ class ActiveSet:
                gap: np.ndarray | None = None) -> np.ndarray:
         """``r`` of the active set ``base.active - rel + add``. With ``b_r`` and ``gap``: the
         correction of the same system for right-hand side ``b_r`` and gaps ``gap`` instead of
-        ``g`` and ``eps`` (iterative refinement; the ties of ``base`` are then homogeneous)."""
+        ``g`` and ``eps`` (iterative refinement; the ties of ``base`` are then homogeneous).
+        Solves with the factor are the cost: the base's own solution and the solved border
+        column of every changed pair are kept with the base and solved once (iterations
+        revisit the same pairs), in one multi-column solve with whatever else is new."""
         s = self.system
         if b_r is None:
-            b_r, gap, rhs, expand = base.b_r, s.eps, base.rhs, base.expand
+            b_r, gap, rhs, expand = base.b_r, s.eps, None, base.expand
         else:
             rhs, expand = base.project(b_r), lambda z: base.expand(z) - base.r_e
-        if not len(rel) and not len(add):
-            return expand(base.factor.solve(rhs))
         jb_rel = s.jb[rel]
-        Kc = self.k_columns(jb_rel)
-        U = base.project(Kc.toarray())
-        Kbb = Kc[jb_rel, :].toarray()
-        W = np.zeros((base.n_z, len(add)))
-        for c, sign in ((s.jb[add], 1.0), (s.ja[add], -1.0)):
-            zi = base.zidx[c]
-            m = zi >= 0
-            W[zi[m], np.flatnonzero(m)] = sign
-        M = np.hstack([U, W])
-        sol = base.factor.solve(np.column_stack([rhs, M]))
-        y0, X = sol[:, 0], sol[:, 1:]
+        keys = [("rel", k) for k in rel] + [("add", k) for k in add]
+        M = self._border(base, rel, add) if keys else None
+        new = [i for i, k in enumerate(keys) if k not in base.solved]
+        need_y0 = rhs is not None or base.y0 is None
+        first = [base.rhs if rhs is None else rhs] if need_y0 else []
+        if first or new:
+            sol = base.factor.solve(np.column_stack(first + [M[:, i] for i in new])).reshape(base.n_z, -1)
+            for i, x in zip(new, sol[:, len(first):].T, strict=True):
+                base.solved[keys[i]] = x
+            if need_y0:
+                y0 = sol[:, 0]
+                if rhs is None:
+                    base.y0 = y0
+        if not need_y0:
+            y0 = base.y0
+        if not keys:
+            return expand(y0)
+        X = np.column_stack([base.solved[k] for k in keys])
         m1 = len(rel)
-        N = np.zeros((M.shape[1], M.shape[1]))
-        N[:m1, :m1] = Kbb
+        N = np.zeros((len(keys), len(keys)))
+        N[:m1, :m1] = self.k_columns(jb_rel)[jb_rel, :].toarray()
         S = N - M.T @ X
         rw = np.concatenate([b_r[jb_rel], gap[add]])
         try:
@@ -136,8 +148,20 @@ class ActiveSet:
         r = expand(y0 - X @ w)
         r[jb_rel] += w[:m1]
         self.stats["schur_updates"] += 1
-        self.stats["max_update"] = max(self.stats["max_update"], M.shape[1])
+        self.stats["max_update"] = max(self.stats["max_update"], len(keys))
         return r
+
+    def _border(self, base: _Base, rel: np.ndarray, add: np.ndarray) -> np.ndarray:
+        """The border ``[U W]`` of the bordered system of the changed pairs: ``U`` the stiffness
+        columns of released pairs' lower dofs, ``W`` the tie of each added pair."""
+        s = self.system
+        U = base.project(self.k_columns(s.jb[rel]).toarray())
+        W = np.zeros((base.n_z, len(add)))
+        for c, sign in ((s.jb[add], 1.0), (s.ja[add], -1.0)):
+            zi = base.zidx[c]
+            m = zi >= 0
+            W[zi[m], np.flatnonzero(m)] = sign
+        return np.hstack([U, W])
 
     def _refine(self, base: _Base, rel: np.ndarray, add: np.ndarray, A: np.ndarray, r: np.ndarray,
                 scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -207,8 +231,9 @@ class ActiveSet:
         for it in range(1, MAX_ITER + 1):
             rel = np.flatnonzero(base.active & ~A) if base is not None else None
             add = np.flatnonzero(A & ~base.active) if base is not None else None
-            if base is None or len(rel) + len(add) > MAX_UPDATE:
+            if base is None or len(rel) + len(add) > MAX_UPDATE or len(base.solved) > 2 * MAX_UPDATE:
                 base = _Base(self, A)
+                self.backend = base.factor.method
                 self.stats["factorizations"] += 1
                 rel = add = np.empty(0, int)
             r, res = self._refine(base, rel, add, A, self._solve(base, rel, add), fscale)
@@ -237,27 +262,52 @@ def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.
     return np.interp(fine_x, coarse_x, coarse_active.astype(float)) >= 0.5
 
 
-def limit(system: System) -> dict:
-    """The speed "limit": assemble, factorise and solve ``K`` with every contact pair closed
-    (the bodies tied, floating modes at the anchors): SPD, the same size and sparsity as the
-    fast path's matrices. Nothing solves the discrete problem faster than about this."""
+def limit(system: System, methods: list[str] | None = None) -> dict:
+    """The speed "limit": factorise and solve ``K`` with every contact pair closed (the bodies
+    tied, floating modes at the anchors): SPD, the same size and sparsity as the fast path's
+    matrices. Nothing solves the discrete problem faster than about this. Every backend of
+    :func:`cvxdual.factor.backends` (or ``methods``) is timed, each after a small factorisation
+    that pays its one-time start-up; the fastest is the limit."""
     t0 = time.perf_counter()
     base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
     t1 = time.perf_counter()
-    factor = SPDFactor(base.K)
-    t2 = time.perf_counter()
-    factor.solve(base.rhs)
-    t3 = time.perf_counter()
-    factor.close()
-    return {"n_dofs": int(base.K.shape[0]), "nnz": int(base.K.nnz), "t_matrix": t1 - t0, "t_factor": t2 - t1,
-            "t_solve_lin": t3 - t2, "t_limit": t3 - t1, "backend": factor.method}
+    K = base.K_lower
+    head = K[:200, :200]  # a principal block of an SPD matrix: SPD
+    times = {}
+    with one_blas_thread():
+        for m in methods or backends():
+            SPDFactor(head, m, lower=True).solve(np.ones(head.shape[0]))  # library start-up, not counted
+            ta = time.perf_counter()
+            factor = SPDFactor(K, m, lower=True)
+            tb = time.perf_counter()
+            factor.solve(base.rhs)
+            times[m] = (tb - ta, time.perf_counter() - tb)
+            factor.close()
+    best = min(times, key=lambda m: sum(times[m]))
+    return {"n_dofs": int(K.shape[0]), "nnz": int(2 * K.nnz - K.shape[0]), "t_matrix": t1 - t0, "t_factor": times[best][0],
+            "t_solve_lin": times[best][1], "t_limit": sum(times[best]), "backend": best,
+            **{f"t_limit_{m}": sum(t) for m, t in times.items()}}
+
+
+@functools.cache
+def _openblas():
+    from threadpoolctl import ThreadpoolController
+    return ThreadpoolController().select(internal_api="openblas")
+
+
+def one_blas_thread():
+    """A context with OpenBLAS on one thread: the fast path's dense work is small (Schur
+    complements of at most MAX_UPDATE columns), and threads spinning against Pardiso's (and
+    other processes') made it 10-100 times slower at random on a shared machine."""
+    return _openblas().limit(limits=1)
 
 
 def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Displacements ``u`` (all dofs) and solver statistics."""
     t0 = time.perf_counter()
     ps = ActiveSet(system)
-    r, _, A = ps.solve(active)
-    info = {"solver": "fast", "status": "optimal", "backend": backend(), **ps.stats,
+    with one_blas_thread():
+        r, _, A = ps.solve(active)
+    info = {"solver": "fast", "status": "optimal", "backend": ps.backend, **ps.stats,
             "solve_time": time.perf_counter() - t0, "active": A}
     return system.Z @ r, info

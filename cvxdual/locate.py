@@ -11,7 +11,6 @@ overlap in x. Used for errors against a reference on another mesh.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .mesh import Mesh
 from .pieces import Pieces, slab_bound
@@ -87,6 +86,8 @@ def _locate_body(mesh: Mesh, pieces: Pieces, k: int, toff: int, p: np.ndarray) -
 def nearest_node_values(mesh: Mesh, xy: np.ndarray, body: np.ndarray, values: np.ndarray) -> np.ndarray:
     """``values`` of the nearest mesh node *of the same body* for points ``xy`` (the faces of
     the two bodies share coordinates, so the body must be chosen first)."""
+    from scipy.spatial import cKDTree  # imported here: only output of curved pieces needs it
+
     out = np.zeros((len(xy),) + values.shape[1:])
     for k, bm in enumerate(mesh.bodies):
         m = body == k

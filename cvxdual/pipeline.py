@@ -17,11 +17,12 @@ import numpy as np
 
 from .assembly import System, assemble
 from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
-from .mesh import check_level
+from .fast import solve_fast, transfer_active  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
+from .mesh import check_level, mesh_size
 from .scene import Scene
 from .sizing import check_size
 from .solution import Solution, check_solution, evaluate
-from .solvers import DEFAULT_SOLVER, FAST, resolve_solver
+from .solvers import DEFAULT_SOLVER, FAST, default_solver, resolve_solver
 from .triangulation import check_triangulation, discretize
 from .validate import one_line, short
 
@@ -62,24 +63,29 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
           max_memory=None, fallback: bool = True, **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
-    ``solver`` is a CVXPY solver name (default Clarabel) or ``"fast"``, the active-set path of
-    :mod:`cvxdual.fast` (warm-started from level ``level - 2`` unless ``warm_start`` is false).
+    ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.fast`
+    (warm-started from level ``level - 2`` unless ``warm_start`` is false). By default the
+    CVXPY solver measured fastest at the mesh's size (:func:`cvxdual.solvers.default_solver`:
+    Clarabel, SCS from 2e4 pieces), handing over to Clarabel where it fails.
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
     stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
     ``check`` false returns solutions that fail the accuracy checks (for studies of them).
-    Where the fast path fails (its checks, a cycling active set), the CVXPY path with Clarabel
-    solves instead, unless ``fallback`` is false; ``solver["fallback"]`` (and ``summary.json``)
+    Where the fast path (or the default solver) fails (its checks, a cycling active set), the
+    CVXPY path with Clarabel solves instead, unless ``fallback`` is false; ``solver["fallback"]`` (and ``summary.json``)
     then says why.
     The run's memory is estimated first and refused above ``max_memory`` (bytes or ``"16GB"``;
     default: the memory available, see :mod:`cvxdual.sizing`) with
     :class:`~cvxdual.errors.TooLargeError`.
     """
     scene = as_scene(scene)
-    solver = resolve_solver(solver)
+    chosen = solver is None
     triangulation = check_triangulation(triangulation)
     stress_space = check_stress_space(stress_space)
     level = check_level(scene.mesh.default_level if level is None else level)
+    if chosen and stress_space == "p0":
+        solver = default_solver(mesh_size(scene, level)["triangles"])
+    solver = resolve_solver(solver)
     if solver == FAST and solver_options:
         raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
                           "drop them or choose a CVXPY solver such as CLARABEL")
@@ -89,17 +95,18 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
         try:
             return run(scene, triangulation, level, solver, check, warm_start, bounds, **solver_options)
         except (SolverError, AccuracyError) as e:
-            if solver != FAST or not fallback:
+            if not fallback or not (solver == FAST or (chosen and solver != DEFAULT_SOLVER)):
                 raise
-            # the fast path failed where the CVXPY path may not: hand over, and say so
+            # the fast path (or the size's default) failed where Clarabel may not: hand over, say so
             reason = one_line(e, 300)
+            name = "the fast path" if solver == FAST else solver
             try:
                 check_size(scene, level, False, stress_space, bounds, max_memory)
                 sol = run(scene, triangulation, level, DEFAULT_SOLVER, check, warm_start, bounds)
             except CvxdualError as e2:  # both paths failed: say so, with both reasons
-                both = f"the fast path failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
+                both = f"{name} failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
                 raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
-            return replace(sol, solver={**sol.solver, "fallback": f"fast path failed ({reason}); "
+            return replace(sol, solver={**sol.solver, "fallback": f"{name} failed ({reason}); "
                                         f"solved by {DEFAULT_SOLVER}"})
     except MemoryError:
         what = f"ran out of memory solving {short(scene.name, 40)} at level {level}"
@@ -126,7 +133,6 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         t = np.zeros((system.n_pieces, 3))
         info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
     elif solver == FAST:
-        from .fast import solve_fast
         active = warm_start_active(scene, triangulation, level, mesh.pair_x) if warm_start else None
         t_warm = time.perf_counter() - t2
         u, info = solve_fast(system, active)
@@ -152,7 +158,7 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         fields["space"] = space
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
-               "recover": t5 - t4, "total": t5 - t0}
+               "recover": t5 - t4, "error": (fields["error"] or {}).get("seconds", 0.0), "total": t5 - t0}
     sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings=timings,
                    **fields)
     if check:
@@ -165,7 +171,6 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
     same way), transferred to the abscissae ``pair_x``; ``None`` below level 2."""
     if level < 2:
         return None
-    from .fast import solve_fast, transfer_active
     system = build_system(scene, triangulation, level - 2)
     if not np.any(system.f) and np.all(system.eps >= 0):
         return None
@@ -245,7 +250,6 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
     from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
     from .equilibrium import EquilibriumSpace, check_flat
     from .exact import exact_field
-    from .fast import solve_fast
     check_flat(scene)
     t0 = time.perf_counter()
     system = build_system(scene, triangulation, level)
@@ -282,6 +286,7 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
            "penetration": float(max(0.0, -smin.min(initial=0.0)) / delta)}
     exact = exact_field(scene)
     error = None
+    t_err = time.perf_counter()
     if exact is not None:
         e = exact_errors(space, sigma, v, exact)
         error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
@@ -289,11 +294,12 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
                  "displacement_energy": e["displacement_a"],
                  "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else None}
     t4 = time.perf_counter()
+    t_err = t4 - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
     sol = Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
                    stress=sigma, displacement=v, solver=info,
                    timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2,
-                            "recover": t4 - t3, "total": t4 - t0},
+                            "recover": t4 - t3, "error": t_err, "total": t4 - t0},
                    objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res,
                    contact=eq_contact(space, system, sigma, v, blocks),
                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)

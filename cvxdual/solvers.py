@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import time
-
-import cvxpy as cp
+import warnings
 
 from .errors import SolverError, UnknownSolverError
 from .validate import one_line
 
-DEFAULT_SOLVER = "CLARABEL"
+DEFAULT_SOLVER = "CLARABEL"  # the reference, and where every other path hands over
+# from this many pieces SCS (with SOLVER_OPTIONS) is the default: 2.5-3x faster than Clarabel at
+# 4e4-1.5e5 pieces, every accuracy check passed, hard cases included; below, the two tie
+# within noise and Clarabel keeps the wider margins (reports/speed.md, "QP solvers")
+LARGE_QP = 20_000
 FAST = "FAST"  # the active-set path of cvxdual.fast, not a CVXPY solver
 
 # The QP solvers CVXPY can call for the dual, with the options that give each a chance at the
@@ -24,11 +27,21 @@ SOLVER_OPTIONS: dict[str, dict] = {
 }
 
 
+def default_solver(n_pieces: float) -> str:
+    """The CVXPY solver used when none is named, for a mesh of ``n_pieces`` pieces."""
+    if n_pieces >= LARGE_QP:
+        import cvxpy as cp
+        if "SCS" in cp.installed_solvers():
+            return "SCS"
+    return DEFAULT_SOLVER
+
+
 def resolve_solver(name: str | None) -> str:
     """Normalise a solver name; raise :class:`UnknownSolverError` naming the installed ones."""
     name = DEFAULT_SOLVER if name is None else str(name).upper()
     if name == FAST:
         return FAST
+    import cvxpy as cp  # 0.3 s to import: only for the CVXPY path
     installed = cp.installed_solvers()
     if name not in installed:
         raise UnknownSolverError(
@@ -37,25 +50,30 @@ def resolve_solver(name: str | None) -> str:
     return name
 
 
+# CVXPY's status strings (cvxpy.INFEASIBLE, ...), spelled out so that this module loads without it
 _ADVICE = {
-    cp.INFEASIBLE: "no statically admissible stress field exists: check that the loads push the bodies "
+    "infeasible": "no statically admissible stress field exists: check that the loads push the bodies "
                    "together and are balanced",
-    cp.INFEASIBLE_INACCURATE: "the solver suspects infeasibility but is not sure: check the loads, or try "
+    "infeasible_inaccurate": "the solver suspects infeasibility but is not sure: check the loads, or try "
                               "a finer mesh or another solver",
-    cp.UNBOUNDED: "the problem is unbounded: a body can move freely; add supports",
-    cp.UNBOUNDED_INACCURATE: "the problem looks unbounded: a body can move freely; add supports",
-    cp.OPTIMAL_INACCURATE: "the solver stopped before reaching its tolerances (inaccurate); try Clarabel, "
+    "unbounded": "the problem is unbounded: a body can move freely; add supports",
+    "unbounded_inaccurate": "the problem looks unbounded: a body can move freely; add supports",
+    "optimal_inaccurate": "the solver stopped before reaching its tolerances (inaccurate); try Clarabel, "
                            "a coarser mesh, or more iterations",
-    cp.USER_LIMIT: "the solver hit an iteration or time limit; raise max_iter or use Clarabel",
+    "user_limit": "the solver hit an iteration or time limit; raise max_iter or use Clarabel",
 }
 
 
-def solve_problem(problem: cp.Problem, solver: str, what: str, **options) -> dict:
-    """Solve ``problem``; return timing and statistics, or raise :class:`SolverError`."""
+def solve_problem(problem, solver: str, what: str, **options) -> dict:
+    """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`."""
+    import cvxpy as cp
     opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
     t0 = time.perf_counter()
     try:
-        problem.solve(solver=solver, **opts)
+        with warnings.catch_warnings():
+            # an inaccurate status becomes a SolverError below, with advice: CVXPY's warning repeats it
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            problem.solve(solver=solver, **opts)
     except cp.error.SolverError as e:
         raise SolverError(f"{what}: solver {solver} failed ({str(e).splitlines()[0] if str(e) else 'no message'}); "
                           "try another solver (e.g. CLARABEL) or a coarser mesh") from None

@@ -74,3 +74,19 @@ def test_no_private_names_across_modules():
     leaks = [(m, t, n) for m, imps in graph.items() for t, names in imps for n in names
              if n.startswith("_") and t != m]
     assert not leaks
+
+
+@pytest.mark.parametrize("plots", [False, True])
+def test_fast_cli_run_imports_no_heavy_library_it_does_not_use(tmp_path, plots):
+    """`cvxdual solve --solver fast` never loads CVXPY, pandas or Dask (0.3 s, 0.2 s and more of
+    start-up), and matplotlib only to draw; checked in a fresh interpreter, where nothing else
+    can have loaded them."""
+    import subprocess
+    import sys
+    argv = ["solve", "--level", "0", "--solver", "fast", "--out", str(tmp_path / "o")] + ([] if plots else
+                                                                                      ["--no-plots"])
+    code = (f"import sys; from cvxdual.cli import main; assert main({argv!r}) == 0; "
+            "print(sorted(m for m in ('cvxpy', 'pandas', 'dask', 'matplotlib', 'scipy.optimize') if m in sys.modules))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip().splitlines()[-1] == ("['matplotlib']" if plots else "[]")

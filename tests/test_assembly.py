@@ -86,3 +86,46 @@ def test_energy_matches_stiffness():
     # K = E A_h^-1 E^T: check on a vector through the stresses
     t = s.stresses_from_displacement(q).ravel()
     np.testing.assert_allclose(s.E @ t, K @ q, rtol=1e-10, atol=1e-10 * np.abs(K @ q).max())
+
+
+def test_separation_work_of_one_motion_matches_the_lp():
+    """The closed form for one separating motion against the LP it replaces (random signs,
+    zeros and mixed rows: admissible on one side, both or neither)."""
+    from scipy.optimize import linprog
+
+    from cvxdual.rigid import separation_work
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        dk = rng.normal(size=(rng.integers(1, 6), 1)) * rng.choice([0.0, 1.0], size=(1, 1))
+        dk = np.abs(dk) * rng.choice([-1.0, 1.0]) if rng.random() < 0.6 else dk
+        work = rng.normal(size=1)
+        res = linprog(-work, A_ub=dk, b_ub=np.zeros(len(dk)), bounds=[(-1, 1)], method="highs")
+        # HiGHS is exact on a one-variable LP up to its feasibility tolerance (1e-7)
+        assert separation_work(work, dk) == pytest.approx(-res.fun, abs=1e-7)
+
+
+def test_anchor_pivots_match_pivoted_qr():
+    """The anchors' column choice equals LAPACK's column-pivoted QR (the choice it replaces)."""
+    import scipy.linalg as sla
+
+    from cvxdual.rigid import pivot_columns
+    rng = np.random.default_rng(5)
+    for m in (1, 2, 3):
+        A = rng.normal(size=(m, 200)) * rng.uniform(0.1, 10, size=200)
+        _, _, piv = sla.qr(A, pivoting=True, mode="economic")
+        assert list(pivot_columns(A)) == list(piv[:m])
+
+
+def test_lower_assembly_is_the_lower_triangle_of_the_full_one():
+    """Symmetric blocks, dofs repeated inside a block (tied dofs) and dropped (negative): the
+    half assembly is exactly the lower triangle of the full one."""
+    import scipy.sparse as sp
+
+    from cvxdual.sparse import assemble_blocks, assemble_lower
+    rng = np.random.default_rng(7)
+    B = rng.normal(size=(300, 6, 6))
+    B = B + B.transpose(0, 2, 1)
+    dofs = rng.integers(-1, 40, size=(300, 6))
+    full = assemble_blocks(dofs, dofs, B, (40, 40))
+    # the same sums in another order: rounding of a few additions of O(10) numbers
+    assert abs(assemble_lower(dofs, B, 40) - sp.tril(full)).max() < 1e-12

@@ -33,7 +33,7 @@ def test_solve_writes_the_output_contract(tmp_path, capsys):
     assert s["status"] == "optimal" and s["scene"] == "hertz" and s["level"] == 1
     assert set(s["residuals"]) >= {"equilibrium", "constitutive", "complementarity"}
     assert set(s["contact"]) == {"n_active", "x_min", "x_max", "max_pressure", "total_force"}
-    assert set(s["timings"]) == {"mesh", "assemble", "build", "solve", "recover", "total"}
+    assert set(s["timings"]) == {"mesh", "assemble", "build", "solve", "recover", "error", "total"}
     assert {"a", "p0"} <= set(s["exact"]) and {"l2", "l2_rel", "energy", "energy_rel"} <= set(s["error"])
     c = pd.read_csv(out / "contact.csv")
     assert list(c.columns[:5]) == ["x", "gap", "relative_displacement", "pressure", "active"]

@@ -246,3 +246,22 @@ def test_fast_path_hands_over_to_clarabel_and_says_so():
     assert sol.solver["solver"] == "CLARABEL" and "fast path failed" in sol.summary()["fallback"]
     ref = cd.solve(scene, level=0, solver="CLARABEL")
     assert np.array_equal(sol.stress, ref.stress)  # the hand-over is the CVXPY path itself, nothing else
+
+
+def test_default_solver_by_size_and_its_hand_over(monkeypatch):
+    """Unnamed, the solver is chosen by the mesh's size (SCS from solvers.LARGE_QP pieces); it
+    solves the same QP as Clarabel, and where it fails Clarabel takes over and says so. A named
+    solver never hands over."""
+    import cvxdual.solvers as solvers
+    ref = cd.solve("hertz", "type1", 1, "CLARABEL")
+    assert cd.solve("hertz", "type1", 1).solver["solver"] == "CLARABEL"  # 576 pieces: below the switch
+    monkeypatch.setattr(solvers, "LARGE_QP", 100)
+    sol = cd.solve("hertz", "type1", 1)
+    assert sol.solver["solver"] == "SCS" and sol.solver.get("fallback") is None
+    # two interior/first-order solutions of one QP, both within the checks' 1e-6 tolerances
+    assert np.linalg.norm(sol.stress - ref.stress) <= 1e-5 * np.linalg.norm(ref.stress)
+    monkeypatch.setitem(solvers.SOLVER_OPTIONS, "SCS", {"max_iters": 2})  # SCS cannot finish
+    sol = cd.solve("hertz", "type1", 1)
+    assert sol.solver["solver"] == "CLARABEL" and sol.summary()["fallback"].startswith("SCS failed")
+    with pytest.raises(cd.SolverError):
+        cd.solve("hertz", "type1", 1, "SCS")

@@ -4,9 +4,19 @@ spaces, levels, solvers and a grid of ``--set`` overrides, with a reference and 
 fitted rates, and the plots. ``cvxdual study run SPEC`` is the command line.
 """
 
-from .report import fit_rate, plot_error, rates, write_outputs
-from .runner import run
-from .spec import Case, Reference, Study, StudyError, builtin_specs, load_spec
+import importlib
+
+# report and runner load pandas and Dask (0.3 s and more): on first use, so that the CLI's
+# other commands (which build this package's argument parser) do not pay for them
+_LAZY = {"fit_rate": ".report", "plot_error": ".report", "rates": ".report", "write_outputs": ".report",
+         "run": ".runner", "Case": ".spec", "Reference": ".spec", "Study": ".spec", "StudyError": ".spec",
+         "builtin_specs": ".spec", "load_spec": ".spec"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["Case", "Reference", "Study", "StudyError", "builtin_specs", "fit_rate", "load_spec", "plot_error",
            "rates", "run", "write_outputs"]

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .runner import DEFAULT_CACHE, DEFAULT_MEMORY
+from .spec import DEFAULT_CACHE, DEFAULT_MEMORY
 
 EPILOG = """examples:
   cvxdual study run my_study.toml --out out/my_study
@@ -35,7 +35,7 @@ def add_parser(sub, shortcuts) -> argparse.ArgumentParser:
     st = sub.add_parser("study", help="run a study: a spec of scenes, levels, solvers and overrides on Dask",
                         description="Run a study (a spec of cases) on a Dask cluster and write its table, "
                         "report and plots.", epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ss = st.add_subparsers(dest="study_command", required=True, metavar="{run," + ",".join(shortcuts) + "}")
+    ss = st.add_subparsers(dest="study_command", required=True, metavar="{run," + ",".join(shortcuts) + ",peers}")
     r = ss.add_parser("run", help="run the study of a spec file (TOML or Python)",
                       description="Run the study of a spec file (TOML or Python).")
     r.add_argument("spec", help="spec file (.toml or .py) or a built-in spec name")
@@ -45,6 +45,8 @@ def add_parser(sub, shortcuts) -> argparse.ArgumentParser:
                           f"(cvxdual/study/specs/{name}.*).")
         _options(s)
         s.set_defaults(spec=name)
+    from .peers import add_parser as add_peers
+    add_peers(ss)  # not a spec: the same problem solved by another FE code, in its own environment
     return st
 
 

@@ -41,10 +41,8 @@ from .cases import (
     run_case,
     scene_of,
 )
-from .spec import Study, StudyError, load_module, load_spec
+from .spec import DEFAULT_CACHE, DEFAULT_MEMORY, Study, StudyError, load_module, load_spec
 
-DEFAULT_CACHE = ".cache/cvxdual"
-DEFAULT_MEMORY = "4GB"
 CONNECT_TIMEOUT = "20s"
 
 

@@ -54,6 +54,8 @@ KEYS = {"name", "title", "description", "scenes", "triangulations", "stress_spac
         "tags", "cases", "quick", "hooks", "group", "report", "overrides"}
 BLOCK_KEYS = KEYS - {"name", "title", "description", "cases", "hooks", "report"} | {"name"}
 BUILTIN_SPECS = Path(__file__).resolve().parent / "specs"
+DEFAULT_CACHE = ".cache/cvxdual"  # finished cases, for resuming
+DEFAULT_MEMORY = "4GB"  # per local worker
 
 
 class StudyError(CvxdualError, ValueError):
