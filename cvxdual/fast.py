@@ -284,8 +284,8 @@ def limit(system: System, methods: list[str] | None = None) -> dict:
             times[m] = (tb - ta, time.perf_counter() - tb)
             factor.close()
     best = min(times, key=lambda m: sum(times[m]))
-    return {"n_dofs": int(K.shape[0]), "nnz": int(2 * K.nnz - K.shape[0]), "t_matrix": t1 - t0, "t_factor": times[best][0],
-            "t_solve_lin": times[best][1], "t_limit": sum(times[best]), "backend": best,
+    return {"n_dofs": int(K.shape[0]), "nnz": int(2 * K.nnz - K.shape[0]), "t_matrix": t1 - t0,
+            "t_factor": times[best][0], "t_solve_lin": times[best][1], "t_limit": sum(times[best]), "backend": best,
             **{f"t_limit_{m}": sum(t) for m, t in times.items()}}
 
 
