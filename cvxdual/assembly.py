@@ -140,7 +140,7 @@ def stress_operators(mesh: Mesh, pieces: Pieces) -> tuple[sp.csr_matrix, sp.csr_
     n_p = len(pieces)
     # built directly in compressed form (no COO sort and sum: no two pieces share a column):
     # column 3P + c of E holds |P| B_P[c, :] at the piece's six (distinct) dofs; A_h is block diagonal
-    idx = np.int32 if 3 * n_p < 2**31 - 1 else np.int64
+    idx = np.int32 if 18 * n_p < 2**31 - 1 else np.int64  # E's entries: 18 a piece
     cols = lambda k: np.arange(0, k * 3 * n_p + 1, k, dtype=idx)  # noqa: E731 - k entries per column
     E = sp.csc_matrix(((pieces.area[:, None, None] * pieces.B).reshape(-1),
                        np.repeat(pieces.dofs, 3, axis=0).astype(idx).reshape(-1), cols(6)),

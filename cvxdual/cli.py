@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from .errors import CvxdualError
+from .solvers import LARGE_QP
 from .validate import one_line
 
 MAX_MESSAGE = 400  # characters of an error line: a sentence, never a dump of the input
@@ -106,8 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(Hlavacek-Krizek) (default: type1)")
     s.add_argument("--level", type=int, default=None, help="mesh level, h halves per level (default: the scene's)")
     s.add_argument("--solver", default=None, help="a CVXPY solver name, or fast: the active-set path (default: "
-                   "the CVXPY solver measured fastest at the mesh's size, CLARABEL below 2e4 pieces and SCS above, "
-                   "Clarabel taking over where SCS fails)")
+                   f"the CVXPY solver measured fastest at the mesh's size, CLARABEL below {LARGE_QP:.0e} pieces and "
+                   "SCS above, Clarabel taking over where SCS fails)")
     s.add_argument("--stress-space", default="p0", choices=("p0", "eq"),
                    help="p0: the paper's piecewise-constant stresses; eq: exactly admissible equilibrium "
                    "stresses with certified bounds, flat faces only (default: p0)")

@@ -25,10 +25,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .errors import SolverError
+from .validate import one_line
 
 # below this many unknowns SuperLU beats CHOLMOD and Pardiso (their set-up and threads cost more
 # than the factorisation itself; level 2 of hertz, 2.4k unknowns: 2.6 ms against 4.2 ms)
 LARGE_FROM = 5000
+# a pivot below this fraction of the largest: singular to working precision (SPD stiffness
+# matrices of the scenes have pivot ratios above 1e-10; a floating mode gives <= 0)
+PIVOT_TOL = 1e-13
 
 
 @functools.cache
@@ -85,15 +89,16 @@ class SPDFactor:
         self.method = method or backend(self.n)
         if self.n == 0:
             return
+        if self.method not in backends():
+            raise SolverError(f"factorisation backend {self.method!r} is not available here; choose one of "
+                              f"{', '.join(backends())}")
+        make = _FACTOR[self.method]
         try:
-            L = sp.csr_matrix(A) if lower else sp.tril(A, format="csr")
-            self._solve = _FACTOR[self.method](L, self)
-        except KeyError:
-            raise SolverError(f"unknown factorisation backend {self.method!r}; choose one of "
-                              f"{', '.join(backends())}") from None
-        except Exception as e:  # noqa: BLE001 - every backend raises its own types
-            raise SolverError(f"the stiffness matrix could not be factorised ({e}); a body may be free to "
-                              "move (add a support) or the active contact set leaves it floating") from None
+            self._solve = make(sp.csr_matrix(A) if lower else sp.tril(A, format="csr"), self)
+        except Exception as e:  # noqa: BLE001 - CHOLMOD raises ArithmeticError(column), the others their own
+            why = f"not positive definite at column {e}" if isinstance(e, ArithmeticError) else one_line(e, 120)
+            raise SolverError(f"the stiffness matrix could not be factorised by {self.method} ({why}); a body may "
+                              "be free to move (add a support) or the active contact set leaves it floating") from None
 
     def close(self) -> None:
         """Release the factorisation (Pardiso keeps it outside Python's memory management)."""
@@ -134,11 +139,23 @@ def _pardiso(L, owner: SPDFactor):
     return lambda b: ps.solve(U, b)
 
 
+class NotPositiveDefiniteError(ValueError):
+    """A pivot of an LDL^T or LU factorisation without pivoting is not clearly positive."""
+
+
+def _check_pivots(d: np.ndarray) -> None:
+    # without pivoting a singular or indefinite matrix gives tiny or negative pivots instead of
+    # an error (a floating mode: -1e-10 against 1.7e6); Cholesky backends refuse these themselves
+    if d.min() <= PIVOT_TOL * d.max():
+        raise NotPositiveDefiniteError(f"pivot {d.min():.2g} against a largest {d.max():.2g}")
+
+
 def _superlu(L, owner: SPDFactor):
     # symmetric mode with no pivoting: SPD needs none, and the minimum-degree ordering of A + A^T
     # is kept (0-30 % faster than the default at small sizes)
     lu = spla.splu(sp.csc_matrix(_full(L)), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                    options={"SymmetricMode": True})
+    _check_pivots(lu.U.diagonal())
     return lu.solve
 
 
@@ -159,6 +176,7 @@ def _cholmod(L, owner: SPDFactor):
 def _qdldl(L, owner: SPDFactor):
     import qdldl
     s = qdldl.Solver(L.T.tocsc())
+    _check_pivots(s.factors()[1])  # (L, D, permutation)
     return lambda b: np.column_stack([s.solve(c) for c in b.T]) if b.ndim == 2 else s.solve(b)
 
 

@@ -231,7 +231,7 @@ class ActiveSet:
         for it in range(1, MAX_ITER + 1):
             rel = np.flatnonzero(base.active & ~A) if base is not None else None
             add = np.flatnonzero(A & ~base.active) if base is not None else None
-            if base is None or len(rel) + len(add) > MAX_UPDATE or len(base.solved) > 2 * MAX_UPDATE:
+            if base is None or len(rel) + len(add) > MAX_UPDATE or len(base.solved) > MAX_UPDATE:
                 base = _Base(self, A)
                 self.backend = base.factor.method
                 self.stats["factorizations"] += 1
@@ -262,11 +262,11 @@ def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.
     return np.interp(fine_x, coarse_x, coarse_active.astype(float)) >= 0.5
 
 
-def limit(system: System, methods: list[str] | None = None) -> dict:
+def limit(system: System) -> dict:
     """The speed "limit": factorise and solve ``K`` with every contact pair closed (the bodies
     tied, floating modes at the anchors): SPD, the same size and sparsity as the fast path's
     matrices. Nothing solves the discrete problem faster than about this. Every backend of
-    :func:`cvxdual.factor.backends` (or ``methods``) is timed, each after a small factorisation
+    :func:`cvxdual.factor.backends` is timed, each after a small factorisation
     that pays its one-time start-up; the fastest is the limit."""
     t0 = time.perf_counter()
     base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
@@ -275,7 +275,7 @@ def limit(system: System, methods: list[str] | None = None) -> dict:
     head = K[:200, :200]  # a principal block of an SPD matrix: SPD
     times = {}
     with one_blas_thread():
-        for m in methods or backends():
+        for m in backends():
             SPDFactor(head, m, lower=True).solve(np.ones(head.shape[0]))  # library start-up, not counted
             ta = time.perf_counter()
             factor = SPDFactor(K, m, lower=True)

@@ -64,9 +64,10 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.fast`
-    (warm-started from level ``level - 2`` unless ``warm_start`` is false). By default the
-    CVXPY solver measured fastest at the mesh's size (:func:`cvxdual.solvers.default_solver`:
-    Clarabel, SCS from 2e4 pieces), handing over to Clarabel where it fails.
+    (warm-started from level ``level - 2`` unless ``warm_start`` is false). By default (no
+    solver and no options) the CVXPY solver measured fastest at the mesh's size
+    (:func:`cvxdual.solvers.default_solver`: Clarabel, SCS from 2e4 pieces), handing over to
+    Clarabel where it fails; options alone go to Clarabel.
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
     stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
@@ -79,7 +80,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     :class:`~cvxdual.errors.TooLargeError`.
     """
     scene = as_scene(scene)
-    chosen = solver is None
+    chosen = solver is None and not solver_options  # options name their solver: Clarabel's, as always
     triangulation = check_triangulation(triangulation)
     stress_space = check_stress_space(stress_space)
     level = check_level(scene.mesh.default_level if level is None else level)
@@ -158,7 +159,7 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         fields["space"] = space
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
-               "recover": t5 - t4, "error": (fields["error"] or {}).get("seconds", 0.0), "total": t5 - t0}
+               "recover": t5 - t4, "error": fields.pop("timings")["error"], "total": t5 - t0}
     sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings=timings,
                    **fields)
     if check:
@@ -192,7 +193,7 @@ def recover(model, triangulation: str, level: int, info: dict, check: bool = Tru
         raise SolverError(f"the model's last solve ended with status {status!r}, not 'optimal'; there is no "
                           "solution to recover (see the solver's advice, or try CLARABEL)")
     fields = evaluate(model.system, model.stresses(), model.displacements(), info)
-    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings={}, **fields)
+    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), **fields)
     if check and not model.extra:
         check_solution(sol)
     return sol

@@ -151,7 +151,10 @@ def separation_work(work: np.ndarray, dk: np.ndarray) -> float:
     if len(work) == 1:
         # one motion (every built-in scene): rho = 0 and +-1 where it closes no pair are the
         # vertices; the answer without an LP (and without scipy.optimize's 0.1 s import)
-        signs = [s for s in (1.0, -1.0) if np.all(s * dk[:, 0] <= 0)]
+        # the modes are O(1) (unit combinations of length-scaled candidates): relative motions at
+        # rounding level close nothing (the LP's feasibility tolerance ignored them too)
+        tol = 1e-12 * max(float(np.abs(dk).max(initial=0.0)), 1.0)
+        signs = [s for s in (1.0, -1.0) if np.all(s * dk[:, 0] <= tol)]
         return max([0.0] + [s * float(work[0]) for s in signs])
     from scipy.optimize import linprog
     res = linprog(-work, A_ub=dk, b_ub=np.zeros(len(dk)), bounds=[(-1, 1)] * len(work), method="highs")

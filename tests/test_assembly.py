@@ -96,8 +96,11 @@ def test_separation_work_of_one_motion_matches_the_lp():
     from cvxdual.rigid import separation_work
     rng = np.random.default_rng(3)
     for _ in range(200):
-        dk = rng.normal(size=(rng.integers(1, 6), 1)) * rng.choice([0.0, 1.0], size=(1, 1))
+        n = rng.integers(1, 6)
+        dk = rng.normal(size=(n, 1)) * rng.choice([0.0, 1.0], size=(n, 1))  # some rows exactly zero
         dk = np.abs(dk) * rng.choice([-1.0, 1.0]) if rng.random() < 0.6 else dk
+        if rng.random() < 0.2:
+            dk[0, 0] = 1e-17 * rng.choice([-1.0, 1.0])  # rounding-level motion: HiGHS ignores it too
         work = rng.normal(size=1)
         res = linprog(-work, A_ub=dk, b_ub=np.zeros(len(dk)), bounds=[(-1, 1)], method="highs")
         # HiGHS is exact on a one-variable LP up to its feasibility tolerance (1e-7)

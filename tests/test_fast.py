@@ -98,3 +98,29 @@ def test_every_factorisation_backend_solves_the_stiffness():
         np.testing.assert_allclose(x, X[:, 0], rtol=0, atol=1e-12 * np.abs(X).max())
         f.close()
     assert backend(LARGE_FROM - 1) == "superlu"
+
+
+def test_every_backend_refuses_a_singular_stiffness():
+    """An unanchored floating mode makes the stiffness singular: every backend (SuperLU and QDLDL
+    factor without pivoting, so they check their pivots) refuses it instead of solving."""
+    from cvxdual.factor import SPDFactor, backends
+    s = cd.build_system("hertz", "type1", 0)
+    K = (s.Z.T @ s.stiffness() @ s.Z).tocsr()
+    for m in backends():
+        with pytest.raises(cd.SolverError, match="could not be factorised"):
+            SPDFactor(K, m)
+
+
+@pytest.mark.parametrize("method", ["cholmod", "pardiso"])
+def test_fast_path_on_the_large_backends_agrees_with_cvxpy(monkeypatch, method):
+    """The large meshes' backends (taking the lower triangle) on a small mesh: the same stresses
+    as Clarabel, as the default backend gives."""
+    import cvxdual.factor as factor
+    if method not in factor.backends():
+        pytest.skip(f"{method} is not installed here")
+    monkeypatch.setattr(factor, "backend", lambda n=None: method)  # as above LARGE_FROM
+    sol = cd.solve("cylinder-in-groove", "type2", 1, "fast", fallback=False)
+    assert sol.solver["backend"] == method
+    ref = solved("cylinder-in-groove", 1, "type2")
+    # Clarabel's interior point stops at ~1e-8 relative gaps: stresses agree to ~1e-7
+    assert l2_norm(sol.system, sol.stress - ref.stress) <= 1e-6 * l2_norm(ref.system, ref.stress)

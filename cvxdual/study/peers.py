@@ -36,13 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CvxdualError
-from ..files import write_text
+from ..files import write_json, write_text
 from ..output import check_writable
 from ..validate import one_line
+from .cases import ISOLATED_THREADS
 
 PEER_PACKAGE = "dolfinx-solver-real==0.11.0.post0"
 MIN_PYTHON = (3, 12)  # the oldest Python with a wheel of PEER_PACKAGE
-THREADS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+THREADS = ISOLATED_THREADS  # one thread per code, as the studies' isolated cases
 TARGETS = (0.05, 0.02, 0.01, 0.005, 0.0025)
 METRICS = {"peak": "peak pressure", "l2": "L2 pressure profile"}
 BASES = ("solve", "total")  # the time compared: the solver alone, or mesh to pressures
@@ -145,11 +146,11 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
     t0 = time.perf_counter()
     # level 3 is the first factored by the large backend (factor.LARGE_FROM): its start-up is paid here
     solve(scene, "type1", min(max(levels), 3), solver="fast", fallback=False)
-    write_text(data / "cvx.json", json.dumps({
+    write_json(data / "cvx.json", {
         "import_s": import_s, "warmup_s": time.perf_counter() - t0, "threads": {k: os.environ.get(k) for k in THREADS},
         "versions": {"cvxdual": cvxdual.__version__, "numpy": np.__version__, "scipy": scipy.__version__,
                      "python": platform.python_version(), "backend": backend()},
-        "exact": {k: getattr(exact_field(scene).hertz, k) for k in ("a", "p0")}}))
+        "exact": {k: getattr(exact_field(scene).hertz, k) for k in ("a", "p0")}})
     print("peers:ready", flush=True)
     done = set()
     for line in sys.stdin:
@@ -167,11 +168,11 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
         s, c = sol.system, sol.contact
         export_level(s, data / f"hertz_L{L}.npz", cvx_pressure=c["pressure"])
         done |= set(range(L % 2, L + 1, 2))
-        write_text(data / f"cvx_L{L}.json", json.dumps({
+        write_json(data / f"cvx_L{L}.json", {
             "level": L, "n_unknowns": s.n_r - len(s.anchors), "n_active": c["n_active"],
             "iterations": sol.solver.get("iterations"), "repeats": len(runs),
             "times": {k: min(r[k] for r in runs) for k in ("solve", "total")},
-            "phases": min(runs, key=lambda r: r["total"])}))
+            "phases": min(runs, key=lambda r: r["total"])})
         del sol, s, c
         print(f"peers:done {L}", flush=True)
 

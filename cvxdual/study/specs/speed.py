@@ -55,12 +55,13 @@ SPEC = {
     "name": "speed",
     "title": "Speed against error",
     "description": (
-        "Machine: 2 cores; every measurement in its own process, one thread each (two run side by side), all "
-        "ratios from one run. Paths: `cvxpy` = the dual QP built in CVXPY and solved by Clarabel (the reference "
-        "path); `fast` = the condensed displacement form solved by a primal-dual active set method with sparse "
-        "SPD factorisations, warm-started from level L-2 (`cvxdual.fast`). `limit` = the fastest sparse SPD "
-        "factorisation plus solve of the stiffness `K` (all contact pairs closed) that cvxdual can call, the "
-        "same size and sparsity as the fast path's matrix; it excludes building `K`."),
+        "Machine: 2 cores, shared; every measurement in its own process with one thread (`studies/speed.py` runs "
+        "one case at a time), all ratios from one run. Paths: `cvxpy` = the dual QP built in CVXPY and solved by "
+        "Clarabel (the reference path); `fast` = the condensed displacement form solved by a primal-dual "
+        "active set method with sparse SPD factorisations, warm-started from level L-2 (`cvxdual.fast`). "
+        "`limit` = the fastest sparse SPD factorisation plus solve of the stiffness `K` (all contact pairs "
+        "closed) that cvxdual can call, the same size and sparsity as the fast path's matrix; it excludes "
+        "building `K`."),
     "isolate": "process",
     # no finer-rule quadrature check or edge share: they are the study's own work (a 10x10 rule on
     # 1e6 pieces takes ~10 GB) and would count in a case's time and peak memory
@@ -144,7 +145,8 @@ def _small(case, sol) -> dict:
             .format(case.scene_source, case.triangulation, case.level))
     first = min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                      check=True).stdout) for _ in range(3))
-    steady = min(solve(sol.scene, case.triangulation, case.level, "fast").timings["solve"] for _ in range(5))
+    steady = min(solve(sol.scene, case.triangulation, case.level, "fast", fallback=False).timings["solve"]
+                 for _ in range(5))
     return {"t_solve_first": first, "t_solve_steady": steady}
 
 
@@ -405,6 +407,8 @@ def _default_table(s: pd.DataFrame) -> pd.DataFrame:
     from cvxdual.solvers import default_solver
     t = _solver_table(s[s.solver != "fast"])
     rows = []
+    if not len(t):
+        return pd.DataFrame(rows)
     for (scene, level), g in t.groupby(["scene", "level"], sort=False):
         ok = g[g.accepted == "yes"].sort_values("solve s")
         pieces = g.pieces.max()
