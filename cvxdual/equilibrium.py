@@ -461,7 +461,7 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30)
     # below the small eigenvalues of tiny elements (1e-10 left 1e-7 residuals on a mesh with a
     # 0.02-wide column), and only large enough to factorise along the dependent rows.
     mu = 1e-14 * float(BB.diagonal().max())
-    # SPD (mu > 0): Cholesky through Pardiso where available, 10x SuperLU's LU at level 4
+    # SPD (mu > 0): a sparse Cholesky (cvxdual.factor), 10x SuperLU's LU at level 4
     lu = SPDFactor((BB + mu * sp.identity(BB.shape[0], format="csr")).tocsr())
     y = y.copy()
     x = y[rest]

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from .assembly import System
 from .errors import SolverError
-from .factor import SPDFactor, backends
+from .factor import SPDFactor, backend, backends
 from .sparse import assemble_lower
 
 MAX_ITER = 60
@@ -289,6 +289,13 @@ def limit(system: System) -> dict:
             **{f"t_limit_{m}": sum(t) for m, t in times.items()}}
 
 
+def start_up() -> None:
+    """Pay the fast path's one-time library start-up (BLAS thread discovery, the large systems'
+    backend's first factorisation), as :func:`limit` does for every backend it times."""
+    with one_blas_thread():
+        SPDFactor(sp.identity(8, format="csr"), backend()).solve(np.ones(8))
+
+
 @functools.cache
 def _openblas():
     from threadpoolctl import ThreadpoolController
@@ -297,7 +304,7 @@ def _openblas():
 
 def one_blas_thread():
     """A context with OpenBLAS on one thread: the fast path's dense work is small (Schur
-    complements of at most MAX_UPDATE columns), and threads spinning against Pardiso's (and
+    complements of at most MAX_UPDATE columns), and threads spinning against MKL's (and
     other processes') made it 10-100 times slower at random on a shared machine."""
     return _openblas().limit(limits=1)
 

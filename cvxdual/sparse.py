@@ -1,4 +1,7 @@
-"""The one scatter of element blocks into a sparse matrix, used by every assembly."""
+"""Scatters of element blocks into sparse matrices: the general one (:func:`assemble_blocks`)
+and the lower triangle of a symmetric sum (:func:`assemble_lower`, what Cholesky reads).
+``E`` and ``A_h``, whose pieces share no column, are built directly in compressed form
+(:mod:`cvxdual.assembly`)."""
 
 from __future__ import annotations
 

@@ -258,6 +258,12 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
     kw = dict(case.solver_options)
     if case.stress_space != "p0":
         kw["stress_space"] = case.stress_space
+    if dict(case.tags).get("timing") == "steady":
+        # one-time library start-up first (imports, solver set-up), as the limit excludes its own
+        from ..fast import start_up
+        solve(scene, case.triangulation, 0, case.solver, check=False, fallback=False)
+        if case.solver == "fast":
+            start_up()
     prof = None
     if case.profile:
         import cProfile
@@ -364,7 +370,8 @@ def edge_share(sol, ex, rule: int) -> float:
 
 
 def _limit(case: Case, scene) -> dict:
-    """The speed "limit": one sparse factorisation plus solve of the stiffness, all pairs closed."""
+    """The speed "limit" (:func:`cvxdual.fast.limit`): the fastest factorisation plus solve of the
+    stiffness, all pairs closed, among the installed backends."""
     from .. import assemble, discretize, fast
     t0 = time.perf_counter()
     mesh, pieces, ties = discretize(scene, case.triangulation, case.level)
