@@ -272,11 +272,10 @@ def limit(system: System) -> dict:
     base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
     t1 = time.perf_counter()
     K = base.K_lower
-    head = K[:200, :200]  # a principal block of an SPD matrix: SPD
     times = {}
     with one_blas_thread():
         for m in backends():
-            SPDFactor(head, m, lower=True).solve(np.ones(head.shape[0]))  # library start-up, not counted
+            start_up(m)  # one-time library start-up, not counted
             ta = time.perf_counter()
             factor = SPDFactor(K, m, lower=True)
             tb = time.perf_counter()
@@ -289,11 +288,12 @@ def limit(system: System) -> dict:
             **{f"t_limit_{m}": sum(t) for m, t in times.items()}}
 
 
-def start_up() -> None:
-    """Pay the fast path's one-time library start-up (BLAS thread discovery, the large systems'
-    backend's first factorisation), as :func:`limit` does for every backend it times."""
+def start_up(method: str | None = None) -> None:
+    """Pay one-time library start-up (BLAS thread discovery, the first factorisation by ``method``,
+    default the large systems' backend): steady-state timings, as :func:`limit` takes for every
+    backend it times."""
     with one_blas_thread():
-        SPDFactor(sp.identity(8, format="csr"), backend()).solve(np.ones(8))
+        SPDFactor(sp.identity(8, format="csr"), method or backend()).solve(np.ones(8))
 
 
 @functools.cache

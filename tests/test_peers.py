@@ -159,7 +159,7 @@ dump("peer", {"import_s": 0.1, "warmup_s": 0.1, "load": "ufl", "python": "3.12",
               "versions": dict.fromkeys(("dolfinx", "petsc", "ufl", "basix", "ffcx", "numpy"), "x")})
 print("peers:ready", flush=True)
 for line in sys.stdin:
-    L = int(line)
+    L = int(line.split()[0])  # "L RUNS"
     if L >= CRASH:
         sys.exit("stand-in peer: crashed")
     c = json.load(open(f"{data}/cvx_L{L}.json"))

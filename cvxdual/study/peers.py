@@ -131,7 +131,7 @@ def export_level(system, path: Path, **extra) -> None:
 
 
 def cvx_worker(import_s: float, argv: list[str]) -> None:
-    """``DIR REPEATS L...``, then one level per line on stdin: time the fast path at that level, export it
+    """``DIR L...``, then ``L RUNS`` per line on stdin: time the fast path at level ``L`` (best of ``RUNS``), export it
     (and the peer's warm-start cascade L-2, L-4, ...) to ``DIR/hertz_L{L}.npz``, write ``DIR/cvx_L{L}.json``
     and say ``peers:done L``. ``DIR/cvx.json``: versions, import and warm-up times."""
     import scipy
@@ -141,7 +141,7 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
     from ..exact import exact_field
     from ..factor import backend
     from ..pipeline import build_system, solve
-    data, repeats, levels = Path(argv[0]), int(argv[1]), [int(v) for v in argv[2:]]
+    data, levels = Path(argv[0]), [int(v) for v in argv[1:]]
     scene = cvxdual.load_scene("hertz")
     t0 = time.perf_counter()
     # level 3 is the first factored by the large backend (factor.LARGE_FROM): its start-up is paid here
@@ -154,11 +154,11 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
     print("peers:ready", flush=True)
     done = set()
     for line in sys.stdin:
-        L = int(line)
+        L, n_runs = map(int, line.split())
         for k in sorted(set(range(L % 2, L, 2)) - done):  # levels of the peer's warm-start cascade only
             export_level(build_system(scene, "type1", k), data / f"hertz_L{k}.npz")
         runs = []
-        for _ in range(repeats if L < REPEAT_BELOW else 1):
+        for _ in range(n_runs):
             sol = solve(scene, "type1", L, solver="fast", fallback=False)
             t = dict(sol.timings)
             # the error against the exact field is the study's job (computed from the pressures)
@@ -188,13 +188,14 @@ class Worker:
         self.p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, text=True,
                                   env=env)
 
-    def level(self, L: int | None) -> dict | None:
-        """Level ``L``'s results; ``None``: wait until the worker is ready (imported, warmed up)."""
+    def level(self, L: int | None, runs: int = 1) -> dict | None:
+        """Level ``L``'s results, best of ``runs``; ``None``: wait until the worker is ready (imported,
+        warmed up)."""
         timer = threading.Timer(TIMEOUT, self.p.kill)  # a hung worker ends the study rather than blocking it
         timer.start()
         try:
             if L is not None:
-                self.p.stdin.write(f"{L}\n")
+                self.p.stdin.write(f"{L} {runs}\n")
                 self.p.stdin.flush()
             for line in self.p.stdout:
                 if line.strip() == ("peers:ready" if L is None else f"peers:done {L}"):
@@ -206,8 +207,7 @@ class Worker:
         self.p.kill()
         self.p.wait()
         self.log.seek(0)
-        last = [ln for ln in self.log.read().splitlines() if ln.strip()]
-        raise PeerError(one_line(f"exit status {self.p.returncode}: {last[-1] if last else 'no output'}", 300))
+        raise PeerError(_failure(self.p.returncode, self.log.read()))
 
     def close(self) -> dict | None:
         """End the worker; its ``DIR/{name}.json`` (versions, import and warm-up times), if written."""
@@ -229,10 +229,13 @@ def _run(cmd: list[str], env=None, timeout=TIMEOUT) -> str | None:
         r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout)
     except (OSError, subprocess.SubprocessError) as e:
         return one_line(f"{type(e).__name__}: {e}", 300)
-    if r.returncode == 0:
-        return None
-    last = [ln for ln in (r.stderr + "\n" + r.stdout).splitlines() if ln.strip()]
-    return one_line(f"exit status {r.returncode}: {last[-1] if last else 'no output'}", 300)
+    return None if r.returncode == 0 else _failure(r.returncode, r.stderr + "\n" + r.stdout)
+
+
+def _failure(status: int, output: str) -> str:
+    """A failed process in one line: its exit status and the last line it printed."""
+    last = [ln for ln in output.splitlines() if ln.strip()]
+    return one_line(f"exit status {status}: {last[-1] if last else 'no output'}", 300)
 
 
 # -- the peer ----------------------------------------------------------------------------------
@@ -341,11 +344,10 @@ def main(args) -> int:
     load = [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory(prefix="cvxdual-peers-") as tmp:
         data = Path(tmp)
-        workers = {"cvx": Worker("cvx", [sys.executable, "-c", CVX_CODE, str(data), str(args.repeats),
-                                         *map(str, levels)], data, env)}
+        workers = {"cvx": Worker("cvx", [sys.executable, "-c", CVX_CODE, str(data), *map(str, levels)], data, env)}
         if py is not None:
             workers["peer"] = Worker("peer", [py, "-I", str(WORKER), "--data", str(data), "--jit-cache",
-                                              str(venv / "jit-cache"), "--repeats", str(args.repeats)], data, env)
+                                              str(venv / "jit-cache")], data, env)
         rows, stopped = {"cvx": [], "peer": []}, set()
         try:
             for L in [None, *levels]:  # both ready (nothing runs beside the timed code), then turns level by level
@@ -353,7 +355,7 @@ def main(args) -> int:
                 for name in [n for n in workers if n not in stopped]:  # cvxdual first: it exports the level
                     res = None
                     try:
-                        res = workers[name].level(L)
+                        res = workers[name].level(L, args.repeats if L is not None and L < REPEAT_BELOW else 1)
                     except PeerError as e:
                         at = "at start-up" if L is None else f"at level {L}"
                         if name == "cvx":

@@ -1,9 +1,9 @@
 """The dolfinx peer of ``cvxdual study peers`` (:mod:`cvxdual.study.peers`), run by the python of
 the peer's own virtual environment. It must not import cvxdual: numpy and the dolfinx stack only.
 
-    python -I peers_dolfinx.py --data DIR --jit-cache DIR [--repeats N] [--load ufl|exported]
+    python -I peers_dolfinx.py --data DIR --jit-cache DIR [--load ufl|exported]
 
-then one level per line on stdin, each answered by ``peers:done L`` on stdout.
+then ``L RUNS`` per line on stdin (the study's repeat rule), each answered by ``peers:done L`` on stdout.
 
 Reads ``DIR/hertz_L{L}.npz`` (written by the study: cvxdual's mesh, supports, anchor, contact
 pairs, gaps, tributary widths, nodal loads, the exact ``a``, ``p0``) and solves the same discrete
@@ -21,8 +21,8 @@ problem as a conforming P1 displacement code with node-to-node contact:
   is singular: only contact holds the bodies' relative translation).
 
 Writes ``DIR/peer.json`` (versions, import and warm-up times) and per level ``DIR/peer_L{L}.json``:
-the pressures, SNES reason and iterations, the smallest solve and total time over ``--repeats`` runs
-(levels below 4; one run above) and the phases of the run with the smallest total.
+the pressures, SNES reason and iterations, the smallest solve and total time over ``RUNS`` runs and
+the phases of the run with the smallest total.
 """
 
 import argparse
@@ -48,7 +48,6 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 T_IMPORT = time.perf_counter() - T_START
-REPEAT_BELOW = 4  # levels repeated (best of --repeats); above, one run (the study's rule)
 PHASES = ("mesh", "forms_jit", "assemble", "transform", "init", "snes", "post")
 
 
@@ -247,7 +246,7 @@ def solve_cascade(cache, L, load, jit):
 def run_level(data, L, repeats, load, jit):
     cache = {k: dict(np.load(os.path.join(data, f"hertz_L{k}.npz"), allow_pickle=False))
              for k in range(L % 2, L + 1, 2)}  # npz reads stay out of the timings
-    runs = [solve_cascade(cache, L, load, jit) for _ in range(repeats if L < REPEAT_BELOW else 1)]
+    runs = [solve_cascade(cache, L, load, jit) for _ in range(repeats)]
     res = runs[-1]
     best = min(runs, key=lambda r: r["times"]["total"])  # its phases are shown: they add up to its total
     return {"level": L, "n_unknowns": res["n_unknowns"], "reason": res["reason"], "iterations": res["iterations"],
@@ -259,7 +258,6 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True)
     p.add_argument("--jit-cache", required=True)
-    p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--load", choices=("ufl", "exported"), default="ufl")
     args = p.parse_args(argv)
     jit = {"cache_dir": os.path.abspath(args.jit_cache)}
@@ -271,7 +269,7 @@ def main(argv=None):
             "threads": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}}
     print("peers:ready", flush=True)
     for line in sys.stdin:  # one level per line, once the study has exported it and its cascade
-        L = int(line)
+        L, n_runs = map(int, line.split())
         if "warmup_s" not in head:  # untimed: JIT compilation (or cache load) of the forms, MUMPS's first use
             t0 = time.perf_counter()
             solve_level(dict(np.load(os.path.join(args.data, f"hertz_L{L % 2}.npz"), allow_pickle=False)),
@@ -279,7 +277,7 @@ def main(argv=None):
             head["warmup_s"] = time.perf_counter() - t0
             write_json(os.path.join(args.data, "peer.json"), head)
         try:
-            row = run_level(args.data, L, args.repeats, args.load, jit)
+            row = run_level(args.data, L, n_runs, args.load, jit)
         except Exception as e:  # noqa: BLE001 - reported to the study as this level's failure
             row = {"level": L, "error": f"{type(e).__name__}: {e}"}
         write_json(os.path.join(args.data, f"peer_L{L}.json"), row)
