@@ -11,6 +11,7 @@ from .errors import (
                      AccuracyError,
                      CvxdualError,
                      MeshError,
+                     ModelError,
                      NoAdmissibleStressError,
                      OutputError,
                      SceneError,
@@ -23,7 +24,7 @@ from .exact import exact_field
 from .materials import Material
 from .mesh import build_mesh
 from .pipeline import build_model, build_system, recover, solve
-from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
+from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
 from .scenefile import builtin_scenes, load_scene
 from .solution import Solution
 from .triangulation import discretize
@@ -41,8 +42,8 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
-    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Material",
-    "MeshError", "MeshSpec", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
+    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Friction", "Material",
+    "MeshError", "MeshSpec", "ModelError", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
     "SceneError", "Solution", "SolverError", "System", "TooLargeError", "Traction", "UnbalancedLoadError",
     "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize",
     "exact_field", "load_scene", "recover", "solve",

@@ -1,79 +1,498 @@
-"""The discrete dual problem as a CVXPY model (docs/theory.md#discretisation).
+"""The discrete dual problem as a CVXPY modelling object (docs/reformulate.md).
 
 One stress Variable ``t`` for all pieces; the admissibility ``<lam_h, e(v_h)> >= L(v_h)``
 for all ``v_h`` in the cone ``K0h`` is written through the cone's generators (the paper's
-(3.5), (3.6)): with ``H = T^T Z^T E`` and ``h = T^T Z^T f``,
+(3.5), (3.6)): with ``H = T^T Z^T E`` and ``h = T^T Z^T f``, every row of ``H t - h`` is the
+residual force ``T^T R`` of a generator, and
 
 - ``equilibrium``: ``H[J0] t == h[J0]`` (generators ``+-e_j``, ``j`` in ``J0``),
 - ``contact``: ``H[J-] t <= h[J-]`` (generators ``-e_m``: compressive contact forces),
 
-and the objective is ``1/2 t.A_h t - t.E^T q0``. The model is nondimensionalised (lengths
-by ``L``, stiffness by ``E_ref``, stresses by ``sigma_ref``; see :class:`~cvxdual.assembly.Scales`)
-so that Pa/m and MPa/mm scenes give the same QP. ``stress`` is the physical stress
-expression, for constraints a user adds.
+with the objective ``1/2 t.A_h t - t.E^T q0``. Paper names are kept (``t`` for ``lam_h``,
+``J0``, ``J-``, ``eps``). The model is nondimensionalised (lengths by ``L``, stiffness by
+``E_ref``, stresses by ``sigma_ref``; :class:`~cvxdual.assembly.Scales`); every expression it
+offers to a user (``stress``, ``contact_force``, ...) is in physical units.
+
+The reformulations of docs/reformulate.md change rows, never the rest: Tresca friction
+replaces the tangential rows of each pair ``k`` (``R'_x(A_k) = R''_x(B_k) = 0``) by
+``R'_x(A_k) + R''_x(B_k) = 0`` and ``|R''_x(B_k)| <= g_k w_k``; adhesion moves the contact rows
+to ``R''_y(B_k) <= sigma_a w_k``; ``load_factor`` multiplies ``h``. The multipliers of all rows
+are the displacements (slips included), recovered as ``u_h = Z (r0 - delta T y)``.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cvxpy as cp
 import numpy as np
+import scipy.sparse as sp
 
 from .assembly import System
-from .solvers import solve_problem
+from .errors import AccuracyError, ModelError
+from .invariants import out_of_plane_factor
+from .solution import (
+    TOLERANCES,
+    Solution,
+    admissibility,
+    complementarity,
+    duality_gap,
+    evaluate,
+    load_scale,
+    penetration,
+)
+from .solvers import DEFAULT_SOLVER, resolve_solver, solve_problem
+
+# a user constraint may be violated by this much relative to the size of its terms: the
+# interior-point solvers stop at 1e-8 relative feasibility, so 1e-6 leaves a margin of 100
+USER_TOLERANCE = 1e-6
+
+
+def _selector(rows: np.ndarray, n: int, sign: float = 1.0) -> sp.csr_matrix:
+    """``(len(rows), n)`` matrix picking ``rows`` (times ``sign``)."""
+    k = len(rows)
+    return sp.csr_matrix((np.full(k, sign), (np.arange(k), rows)), shape=(k, n))
+
+
+def _per_pair(value, n_pairs: int, what: str, fix: str):
+    """A non-negative number, an ``(n_pairs,)`` array or a non-negative cvxpy Parameter."""
+    if isinstance(value, cp.Parameter):
+        if value.shape not in ((), (n_pairs,)) or not value.is_nonneg():
+            raise ModelError(f"{what} as a cvxpy Parameter must be declared nonneg=True with shape () or "
+                             f"({n_pairs},), got shape {value.shape}; {fix}")
+        return value
+    if isinstance(value, (cp.Expression, cp.constraints.Constraint)):
+        raise ModelError(f"{what} must be a number, an array or a cvxpy Parameter, not an expression; {fix}")
+    try:
+        arr = np.broadcast_to(np.asarray(value, dtype=float), (n_pairs,)).copy()
+    except (TypeError, ValueError):
+        raise ModelError(f"{what} must be a number or one value per contact pair ({n_pairs}), "
+                         f"got {np.shape(value) if hasattr(value, '__len__') else type(value).__name__}; {fix}") from None
+    if isinstance(value, bool) or np.isnan(arr).any() or (arr < 0).any():
+        raise ModelError(f"{what} must be non-negative numbers (inf allowed), got {value!r}; {fix}")
+    return arr
 
 
 class DualModel:
-    """The CVXPY problem of the discrete dual, with named handles.
+    """The CVXPY problem of the discrete dual, a modelling object a user may change.
 
-    Attributes: ``t`` (scaled stress Variable, ``3 n_pieces``), ``stress`` (physical stresses,
-    an ``(n_pieces, 3)`` expression), ``constraints`` (``{"equilibrium", "contact"}``),
-    ``extra`` (user constraints), ``problem`` (the :class:`cvxpy.Problem`).
+    Handles: ``t`` (scaled stress Variable, ``3 n_pieces``), ``load_factor`` (a non-negative
+    Parameter, default 1, multiplying the applied loads; a Variable with ``limit_analysis``),
+    ``constraints`` (the package's named rows), ``user_constraints``, ``objective`` and
+    ``problem`` (read-only: change them with :meth:`add_constraint`, :meth:`set_objective`,
+    :meth:`add_friction`, :meth:`allow_adhesion`).
+
+    Expressions in physical units: ``stress`` ``(n_pieces, 3)``, ``contact_force`` (nodal
+    normal force per pair, compressive positive), ``contact_pressure`` (force over the pair's
+    tributary length), ``total_contact_force``, ``tangential_force`` (per pair: the ``x`` force
+    of the upper body on the lower one; 0 where the pair's ``x`` dofs are fixed),
+    ``complementary_energy``, and :meth:`shear_stress`, :meth:`von_mises` per piece.
+
+    ``limit_analysis=True`` builds the static theorem's problem: no elastic energy, the loads
+    ``load_factor * f`` with ``load_factor`` a Variable, and the objective ``maximise
+    load_factor``; add yield constraints before solving.
     """
 
-    def __init__(self, system: System):
+    def __init__(self, system: System, triangulation: str = "type1", limit_analysis: bool = False):
         self.system = system
+        self.triangulation = triangulation
+        self.limit_analysis = bool(limit_analysis)
         sc = system.scales
         L, E0, s0 = sc.length, sc.modulus, sc.stress
-        T = system.T
+        n_r, n_p = system.n_r, system.n_pieces
         ZT = system.Z.T.tocsr()
-        H = (T.T @ (ZT @ system.E)).tocsr() / L
-        h = (T.T @ (ZT @ system.f)) / (s0 * L)
+        self._H = (system.T.T @ (ZT @ system.E)).tocsr() / L  # rows: T^T R / (s0 L) per unit t
+        self._h = (system.T.T @ (ZT @ system.f)) / (s0 * L)
         self.J0, self.Jm = system.index_sets
+        up, lo = system.mesh.pairs.T
+        self._jxa, self._jxb = system.rdof[2 * up], system.rdof[2 * lo]
+        self._slides = (self._jxa >= 0) & (self._jxb >= 0)  # pairs with a tangential unknown
+        self._force_unit = s0 * L  # a row of H t - h times this is a nodal force
+        self.t = cp.Variable(3 * n_p, name="t")
+        if self.limit_analysis:
+            self.load_factor = cp.Variable(nonneg=True, name="load_factor")
+        else:
+            self.load_factor = cp.Parameter(nonneg=True, value=1.0, name="load_factor")
         A = (system.Ah * (E0 / L**2)).tocsr()
         c = (system.E.T @ system.q0) * (E0 / (s0 * L**2))
-        n_p = system.n_pieces
-        self.t = cp.Variable(3 * n_p, name="t")
-        self.constraints = {
-            "equilibrium": H[self.J0] @ self.t == h[self.J0],
-            "contact": H[self.Jm] @ self.t <= h[self.Jm],
-        }
-        self.objective = cp.Minimize(0.5 * cp.quad_form(self.t, A, assume_PSD=True) - c @ self.t)
-        self.extra: list[cp.Constraint] = []
-        self.stress = s0 * cp.reshape(self.t, (n_p, 3), order="C")
-        self._H, self._h, self._A, self._c = H, h, A, c
-        self.problem = cp.Problem(self.objective, list(self.constraints.values()))
+        self._energy = 0.5 * cp.quad_form(self.t, A, assume_PSD=True) - c @ self.t  # scaled S(t)
+        self._energy_unit = s0**2 * L**2 / E0
+        self._default = cp.Maximize(self.load_factor) if self.limit_analysis else cp.Minimize(self._energy)
+        self._objective = self._default
+        self._user: list[tuple[str, cp.Constraint]] = []
+        self._g = None  # Tresca thresholds: number array or Parameter
+        self._sigma_a = None  # adhesion: number array or Parameter
+        self._version = 0  # bumped by every change of the problem
+        self._solved = None  # (version, parameter values, solver, options) of the last solve
+        self._problem = None
+        self.info: dict = {}
+        self._build()
 
-    def add_constraint(self, *constraints: cp.Constraint) -> cp.Problem:
-        """Add convex constraints (e.g. on :attr:`stress`) and rebuild :attr:`problem`."""
-        self.extra.extend(constraints)
-        self.problem = cp.Problem(self.objective, [*self.constraints.values(), *self.extra])
-        return self.problem
+    # -- rows ---------------------------------------------------------------------------
+    def _rows(self, M: sp.csr_matrix):
+        """``M (H t - load_factor h)``: generator rows in units of ``s0 L``."""
+        return (M @ self._H) @ self.t - self.load_factor * (M @ self._h)
 
-    def solve(self, solver: str = "CLARABEL", **options) -> dict:
-        return solve_problem(self.problem, solver, "dual QP", **options)
+    def _pair_bound(self, value, pairs: np.ndarray):
+        """``value_k w_k / (s0 L)`` at ``pairs`` (a traction times the tributary length, scaled)."""
+        w = self.system.width[pairs] / self._force_unit
+        if isinstance(value, cp.Parameter):
+            return cp.multiply(value if value.ndim == 0 else value[pairs], w)
+        return value[pairs] * w
+
+    def _build(self) -> None:
+        """The package's rows from the current friction and adhesion: ``constraints``, and the
+        maps ``M`` of each block into the multipliers ``y`` (``y = sum M^T dual``)."""
+        n_r = self.system.n_r
+        fric = np.zeros(len(self._slides), bool)  # pairs with |Q| <= g w rows
+        stick = np.zeros(len(self._slides), bool)  # pairs with free slip rows dropped (g = inf)
+        if self._g is not None:
+            g = self._g
+            if isinstance(g, cp.Parameter):
+                fric = self._slides.copy()
+            else:
+                stick = self._slides & np.isinf(g)
+                fric = self._slides & (g > 0) & ~stick
+        tangential = fric | stick  # R'_x(A) + R''_x(B) = 0 replaces both x rows
+        drop = self._jxb[tangential]
+        eq_rows = np.setdiff1d(self.J0, drop)
+        P = _selector(eq_rows, n_r).tolil()
+        where = {int(r): i for i, r in enumerate(eq_rows)}
+        for a, b in zip(self._jxa[tangential], self._jxb[tangential]):
+            P[where[int(a)], int(b)] = 1.0  # action = reaction of the tangential forces
+        P = P.tocsr()
+        jb = self.Jm
+        blocks = {"equilibrium": (P, "==", 0.0), "contact": (_selector(jb, n_r), "<=",
+                                                             0.0 if self._sigma_a is None else
+                                                             self._pair_bound(self._sigma_a, np.arange(len(jb))))}
+        if fric.any():
+            pairs = np.flatnonzero(fric)
+            bound = self._pair_bound(self._g, pairs)
+            blocks["friction_upper"] = (_selector(self._jxb[pairs], n_r), "<=", bound)
+            blocks["friction_lower"] = (_selector(self._jxb[pairs], n_r, -1.0), "<=", bound)
+        self._blocks = blocks
+        self._friction_pairs, self._stick_pairs = fric, stick
+        cons = {}
+        for name, (M, sense, bound) in blocks.items():
+            rows = self._rows(M)
+            cons[name] = rows == bound if sense == "==" else rows <= bound
+        self._constraints = cons
+        self._problem = None
+
+    def _changed(self) -> None:
+        self._version += 1
+        self._problem = None
+
+    # -- the problem, read-only ---------------------------------------------------------
+    @property
+    def constraints(self) -> dict:
+        """The package's named constraints (a copy): ``equilibrium``, ``contact`` and, with
+        friction, ``friction_upper`` / ``friction_lower`` (``+-R''_x(B_k) <= g_k w_k``)."""
+        return dict(self._constraints)
+
+    @property
+    def user_constraints(self) -> dict:
+        """The constraints added by :meth:`add_constraint`, by name."""
+        return dict(self._user)
+
+    @property
+    def objective(self):
+        return self._objective
+
+    @property
+    def problem(self) -> cp.Problem:
+        """The current :class:`cvxpy.Problem` (rebuilt after every change; do not replace it)."""
+        if self._problem is None:
+            self._problem = cp.Problem(self._objective, [*self._constraints.values(), *(c for _, c in self._user)])
+        return self._problem
+
+    @problem.setter
+    def problem(self, value):
+        raise ModelError("model.problem cannot be replaced (a later change would silently rebuild the old one); "
+                         "use model.set_objective(...) and model.add_constraint(...)")
+
+    def changes(self) -> list[str]:
+        """The changes made to the package's problem, as short phrases (for messages)."""
+        out = ["limit analysis (maximise load_factor)"] if self.limit_analysis else []
+        if self._objective is not self._default:
+            out.append("set_objective")
+        out += [f"add_constraint {name!r}" for name, _ in self._user]
+        if self._g is not None:
+            out.append("add_friction")
+        if self._sigma_a is not None:
+            out.append("allow_adhesion")
+        return out
+
+    # -- changes ------------------------------------------------------------------------
+    def add_constraint(self, *constraints, name: str | None = None) -> DualModel:
+        """Add convex constraints (e.g. on :attr:`stress`, :meth:`von_mises`). ``name`` (default
+        ``constraint N``) appears in :attr:`user_constraints`, ``solution.checks`` and errors."""
+        if not constraints:
+            raise ModelError("add_constraint needs at least one constraint, e.g. model.von_mises() <= 500")
+        for c in constraints:
+            if not isinstance(c, cp.constraints.Constraint):
+                raise ModelError(f"add_constraint takes cvxpy constraints (such as model.shear_stress() <= k), got "
+                                 f"{type(c).__name__}: build it from the model's expressions, not from numbers")
+            if not c.is_dcp():
+                raise ModelError(f"constraint {c!s:.80} is not convex (not DCP); only convex constraints keep "
+                                 "the problem solvable")
+        for i, c in enumerate(constraints):
+            label = (name if len(constraints) == 1 else f"{name}[{i}]") if name else f"constraint {len(self._user) + 1}"
+            if label in dict(self._user):
+                raise ModelError(f"a constraint named {label!r} exists already; choose another name")
+            self._user.append((label, c))
+        self._changed()
+        return self
+
+    def set_objective(self, objective) -> DualModel:
+        """Replace the objective (a ``cp.Minimize`` or ``cp.Maximize``), kept until set again.
+        :attr:`complementary_energy` is the default one in physical units."""
+        if not isinstance(objective, (cp.Minimize, cp.Maximize)):
+            raise ModelError(f"set_objective takes cp.Minimize(...) or cp.Maximize(...), got {type(objective).__name__}")
+        if not objective.is_dcp():
+            raise ModelError("the objective is not convex (not DCP): minimise a convex or maximise a concave expression")
+        self._objective = objective
+        self._changed()
+        return self
+
+    def add_friction(self, g) -> DualModel:
+        """Tresca friction: ``|R''_x(B_k)| <= g_k w_k`` at every pair whose ``x`` dofs are free,
+        the tangential action = reaction kept. ``g`` (a traction, the scene's stress unit) is a
+        number, one value per pair, or a non-negative cvxpy Parameter (sweeps compile once);
+        ``inf`` means stick (no slip), 0 frictionless."""
+        fix = "e.g. model.add_friction(0.1 * p0)"
+        if self._g is not None:
+            raise ModelError("friction is set already; build a new model to change it, or pass g as a "
+                             "cvxpy Parameter and change its value")
+        g = _per_pair(g, len(self._slides), "g", fix)
+        if not self._slides.any():
+            raise ModelError("no contact pair has free x dofs (all are supported in x), so friction has "
+                             "nothing to act on")
+        fl = self.system.floating
+        if fl.shape[1] and np.abs(fl[self._jxb[self._slides]] - fl[self._jxa[self._slides]]).max() > 1e-9:
+            raise ModelError("a body can slide freely along the contact (a floating x translation), which friction "
+                             "alone cannot hold; add an x support to that body")
+        self._g = g
+        self._build()
+        self._changed()
+        return self
+
+    def allow_adhesion(self, sigma_a) -> DualModel:
+        """Tension cut-off: contact forces down to ``-sigma_a w_k`` (a traction per pair; a number,
+        one value per pair or a non-negative Parameter). The tension acts at any opening over the
+        whole candidate interval (a cohesive law of infinite range)."""
+        if self._sigma_a is not None:
+            raise ModelError("adhesion is set already; build a new model, or pass sigma_a as a cvxpy Parameter")
+        self._sigma_a = _per_pair(sigma_a, len(self.Jm), "sigma_a", "e.g. model.allow_adhesion(0.01 * p0)")
+        self._build()
+        self._changed()
+        return self
+
+    # -- expressions in physical units --------------------------------------------------
+    @property
+    def stress(self):
+        """``(n_pieces, 3)`` Voigt stresses ``(s11, s22, s12)``."""
+        return self.system.scales.stress * cp.reshape(self.t, (self.system.n_pieces, 3), order="C")
+
+    @property
+    def contact_force(self):
+        """Nodal normal contact force per pair, compressive positive (force per unit thickness)."""
+        return -self._force_unit * self._rows(_selector(self.Jm, self.system.n_r))
+
+    @property
+    def contact_pressure(self):
+        """Contact force per tributary length ``w_k`` of each pair."""
+        return cp.multiply(1.0 / self.system.width, self.contact_force)
+
+    @property
+    def total_contact_force(self):
+        """Sum of the contact forces (a half model carries half of the load)."""
+        return cp.sum(self.contact_force)
+
+    @property
+    def tangential_force(self):
+        """``x`` force of the upper body on the lower one per pair (``R''_x(B_k)``); 0 where the
+        pair's ``x`` dofs are fixed. Identically 0 without friction."""
+        n = len(self._slides)
+        pairs = np.flatnonzero(self._slides)
+        place = sp.csr_matrix((np.ones(len(pairs)), (pairs, np.arange(len(pairs)))), shape=(n, len(pairs)))
+        return self._force_unit * (place @ self._rows(_selector(self._jxb[pairs], self.system.n_r)))
+
+    @property
+    def complementary_energy(self):
+        """``S(t) = 1/2 t.A_h t - t.E^T q0`` (energy per unit thickness)."""
+        return self._energy_unit * self._energy
+
+    def shear_stress(self):
+        """``(n_pieces,)`` in-plane maximum shear ``sqrt(((s11 - s22)/2)^2 + s12^2)`` (convex)."""
+        s = self.stress
+        return cp.norm(cp.vstack([0.5 * (s[:, 0] - s[:, 1]), s[:, 2]]), 2, axis=0)
+
+    def von_mises(self):
+        """``(n_pieces,)`` von Mises stress (convex), with ``s33 = nu (s11 + s22)`` in plane
+        strain and 0 in plane stress."""
+        s = self.stress
+        s33 = cp.multiply(out_of_plane_factor(self.system), s[:, 0] + s[:, 1])
+        d = cp.vstack([s[:, 0] - s[:, 1], s[:, 1] - s33, s33 - s[:, 0], np.sqrt(6.0) * s[:, 2]])
+        return cp.norm(d, 2, axis=0) / np.sqrt(2.0)
+
+    # -- solving ------------------------------------------------------------------------
+    def _state(self) -> tuple:
+        values = tuple(np.asarray(p.value).tobytes() if p.value is not None else None
+                       for p in self.problem.parameters())
+        return self._version, values
+
+    def solve(self, solver: str = DEFAULT_SOLVER, time_limit: float | None = None, verbose: bool = False,
+              **options) -> dict:
+        """Solve; returns the solver's statistics. ``time_limit`` in seconds (Clarabel, SCS,
+        OSQP), ``verbose`` prints the solver's log, ``options`` go to the solver.
+        Raises :class:`~cvxdual.errors.SolverError` naming the model's changes when they make
+        the problem infeasible or unbounded."""
+        solver = resolve_solver(solver)
+        if solver == "FAST":
+            raise ModelError("the fast path solves the package's own problem, not a model; use solver='CLARABEL'")
+        for p in self.problem.parameters():
+            if p.value is None:
+                raise ModelError(f"parameter {p.name()!r} has no value; set {p.name()}.value before solving")
+        key = (*self._state(), solver, repr(sorted(options.items())))
+        if self._solved == key:
+            raise ModelError("the model was solved already with these data; read model.solution(), or change "
+                             "load_factor, a parameter or the model before solving again")
+        self._solved = None
+        changes = self.changes()
+        advice = None
+        if changes:
+            what = ", ".join(changes)
+            advice = {"infeasible": f"no stress field satisfies the model with your changes ({what}); the "
+                                    "scene's own constraints are satisfiable, so relax those changes",
+                      "infeasible_inaccurate": f"the solver suspects your changes ({what}) leave no admissible "
+                                               "stress field; relax them, or try another solver",
+                      "unbounded": f"the objective is unbounded over the admissible stresses with your changes "
+                                   f"({what}); bound it with constraints",
+                      "unbounded_inaccurate": f"the objective looks unbounded with your changes ({what}); "
+                                              "bound it with constraints"}
+        self.info = solve_problem(self.problem, solver, "dual QP", advice, time_limit, verbose, **options)
+        self._solved = key
+        return self.info
+
+    def _require_solved(self) -> None:
+        if self._solved is None:
+            raise ModelError("the model has not been solved (or its last solve failed); call model.solve() first")
+        if self._solved[:2] != self._state():
+            raise ModelError("the model or a parameter changed since the last solve; call model.solve() again")
 
     # -- results in physical units ------------------------------------------------------
     def stresses(self) -> np.ndarray:
         """``(n_pieces, 3)`` Voigt stresses of the last solve."""
+        self._require_solved()
         return self.system.scales.stress * np.asarray(self.t.value).reshape(-1, 3)
 
-    def displacements(self) -> np.ndarray:
-        """Nodal displacements ``u_h = Z (r0 - T y*)`` from the multipliers ``y*``
-        (docs/theory.md#recovery-and-checks)."""
-        s = self.system
-        y = np.zeros(s.n_r)
-        y[self.J0] = self.constraints["equilibrium"].dual_value
-        y[self.Jm] = self.constraints["contact"].dual_value
-        r = s.r0 - s.scales.displacement * (s.T @ y)
-        return s.Z @ r
+    def multipliers(self) -> np.ndarray:
+        """``y`` in ``r`` coordinates of the generators: every block's multipliers mapped back
+        (the slips ``y_kx2`` from the two friction blocks)."""
+        self._require_solved()
+        y = np.zeros(self.system.n_r)
+        for name, (M, _, _) in self._blocks.items():
+            y += M.T @ np.asarray(self._constraints[name].dual_value, dtype=float).ravel()
+        return y
 
+    def displacements(self) -> np.ndarray:
+        """Nodal displacements ``u_h = Z (r0 - delta T y*)`` from the multipliers ``y*``
+        (docs/theory.md#recovery-and-checks). They solve the displacement problem only while
+        the objective is the default and no constraint was added."""
+        s = self.system
+        return s.Z @ (s.r0 - s.scales.displacement * (s.T @ self.multipliers()))
+
+    def value(self, expression) -> np.ndarray:
+        """The value of an expression of this model at the last solve."""
+        self._require_solved()
+        return np.asarray(expression.value, dtype=float)
+
+    def solution(self, check: bool = True) -> Solution:
+        """The :class:`~cvxdual.Solution` of the last solve, with the checks that still hold for
+        the changed problem applied and the others listed, with the reason, in
+        ``solution.checks["skipped"]``. A failed check raises :class:`AccuracyError`."""
+        self._require_solved()
+        s = self.system
+        lf = float(self.load_factor.value)
+        system = s if lf == 1.0 else replace(s, f=lf * s.f)
+        t, u = self.stresses(), self.displacements()
+        g = self._numeric(self._g)
+        sigma_a = self._numeric(self._sigma_a)
+        fields = evaluate(system, t, u, dict(self.info), friction=g, adhesion=sigma_a)
+        fields.pop("timings")
+        applied, skipped = self._checks(system, t, u, fields, g, sigma_a, lf)
+        if "error" in skipped:
+            fields["error"] = None
+        fields["residuals"] = applied
+        fields["duality_gap"] = applied.get("duality_gap", float("nan"))
+        sol = Solution(triangulation=self.triangulation, stress_space="p0", level=int(s.mesh.level),
+                       timings={}, checks={"applied": dict(applied), "skipped": skipped}, **fields)
+        if check:
+            tol = {**TOLERANCES, "user_constraints": USER_TOLERANCE}
+            bad = {k: v for k, v in applied.items() if v > tol[k]}
+            if bad:
+                txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
+                raise AccuracyError(f"solver {self.info.get('solver')} returned 'optimal' but the solution fails "
+                                    f"the checks that apply to this model ({txt}); try model.solve('CLARABEL') "
+                                    "or tighter solver tolerances, or model.solution(check=False) to inspect it")
+        return sol
+
+    def _numeric(self, value):
+        if value is None:
+            return None
+        n = len(self._slides)
+        return np.broadcast_to(np.asarray(value.value if isinstance(value, cp.Parameter) else value, float), (n,))
+
+    def _checks(self, system, t, u, fields, g, sigma_a, lf) -> tuple[dict, dict]:
+        """The residuals that hold for this model (see :meth:`solution`) and the skipped ones."""
+        applied, skipped = {}, {}
+        R, scale = admissibility(system, t)
+        rows = (system.T.T @ R) / self._force_unit
+        floor = max(float(scale.max()), 1e-6 * load_scale(system)) / self._force_unit
+        worst = 0.0
+        for M, sense, bound in self._blocks.values():
+            b = np.asarray(bound.value if isinstance(bound, cp.Expression) else bound, float)
+            r = M @ rows - b
+            worst = max(worst, float(np.abs(r).max(initial=0.0) if sense == "==" else np.maximum(r, 0).max(initial=0.0)))
+        applied["equilibrium"] = worst / floor
+        if self._user:
+            applied["user_constraints"] = max(self._violation(c) for _, c in self._user)
+        standard = self._objective is self._default and not self._user and not self.limit_analysis
+        why = ("the objective was changed" if self._objective is not self._default else
+               "limit analysis has no elastic law" if self.limit_analysis else
+               "user constraints change the optimality conditions" if self._user else "")
+        if standard:
+            c = fields["contact"]
+            applied["constitutive"] = fields["residuals"]["constitutive"]
+            force = c["force"] + (0.0 if sigma_a is None else sigma_a * system.width)
+            applied["complementarity"] = complementarity(system, u, c, force)
+            applied["penetration"] = penetration(system, u, c)
+            applied["duality_gap"] = duality_gap(system, t, u, self._dissipation(system, u, g, sigma_a))
+        else:
+            for k in ("constitutive", "complementarity", "penetration", "duality_gap"):
+                skipped[k] = f"{why}: the multipliers are not the displacements of an elastic solution"
+        if fields["exact"] is not None and (lf != 1.0 or self.changes()):
+            skipped["error"] = ("the exact field is for the scene's own problem, not for "
+                                + ("load_factor != 1" if lf != 1.0 else ", ".join(self.changes())))
+        return applied, skipped
+
+    def _dissipation(self, system, u, g, sigma_a) -> float:
+        """The primal terms friction and adhesion add to ``J``: ``sum g_k w_k |slip_k|`` and
+        ``sigma_a sum w_k opening_k`` (docs/reformulate.md)."""
+        up, lo = system.mesh.pairs.T
+        q = u.reshape(-1, 2)
+        w = system.width
+        out = 0.0
+        if g is not None and self._friction_pairs.any():
+            k = self._friction_pairs
+            out += float(np.sum(g[k] * w[k] * np.abs(q[lo[k], 0] - q[up[k], 0])))
+        if sigma_a is not None:
+            out += float(np.sum(sigma_a * w * (system.eps - (q[lo, 1] - q[up, 1]))))
+        return out
+
+    @staticmethod
+    def _violation(c) -> float:
+        """Largest violation of a user constraint relative to the size of its terms."""
+        size = max((float(np.abs(a.value).max(initial=0.0)) for a in c.args if a.value is not None), default=0.0)
+        return float(np.max(c.violation(), initial=0.0)) / max(size, 1e-300)

@@ -40,6 +40,11 @@ class UnknownSolverError(CvxdualError, ValueError):
     """The requested solver is not known or not installed."""
 
 
+class ModelError(CvxdualError, ValueError):
+    """A CVXPY model is misused: read before it is solved, solved again unchanged, changed
+    in a way it cannot take (friction twice, a non-constraint passed as a constraint)."""
+
+
 class OutputError(CvxdualError, OSError):
     """An output file or directory cannot be written."""
 

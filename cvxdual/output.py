@@ -107,21 +107,33 @@ def prepare_dir(out: str | Path) -> Path:
     return out
 
 
-CONTACT_COLUMNS = ("x", "gap", "relative_displacement", "pressure", "active", "force")
+# tangential_force: x force of the upper body on the lower one at each pair (0 where undefined);
+# slip: relative tangential displacement u''_x - u'_x; stick: 1 where the pair sticks
+CONTACT_COLUMNS = ("x", "gap", "relative_displacement", "pressure", "active", "force", "tangential_force", "slip",
+                   "stick")
+FLAG_COLUMNS = ("active", "stick")  # booleans, written as 0/1
+
+
+def _contact_columns(sol) -> dict:
+    """``sol.contact``'s arrays for :data:`CONTACT_COLUMNS`, flags as integers. A missing column is
+    an error, never filled in: a made-up 0 would read as a computed result."""
+    c = sol.contact
+    missing = [k for k in CONTACT_COLUMNS if k not in c]
+    if missing:
+        raise KeyError(f"the solution's contact data lacks {', '.join(missing)} (columns of contact.csv)")
+    return {k: np.asarray(c[k]).astype(int) if k in FLAG_COLUMNS else c[k] for k in CONTACT_COLUMNS}
 
 
 def contact_table(sol):
     """The contact pairs as a pandas DataFrame (the columns of ``contact.csv``)."""
     import pandas as pd
-    c = sol.contact
-    return pd.DataFrame({k: c[k].astype(int) if k == "active" else c[k] for k in CONTACT_COLUMNS})
+    return pd.DataFrame(_contact_columns(sol))
 
 
 def write_contact_csv(sol, path) -> None:
     """``contact.csv``, one row per pair (written without pandas: it costs 0.2 s to import)."""
-    c = sol.contact
-    cols = np.column_stack([c[k] for k in CONTACT_COLUMNS]).astype(float)
-    fmt = ["%d" if k == "active" else "%.12g" for k in CONTACT_COLUMNS]
+    cols = np.column_stack(list(_contact_columns(sol).values())).astype(float)
+    fmt = ["%d" if k in FLAG_COLUMNS else "%.12g" for k in CONTACT_COLUMNS]
     np.savetxt(path, cols, fmt=fmt, delimiter=",", header=",".join(CONTACT_COLUMNS), comments="")
 
 

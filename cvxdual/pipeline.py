@@ -52,10 +52,16 @@ def build_system(scene, triangulation: str = "type1", level: int | None = None) 
     return assemble(*discretize(scene, check_triangulation(triangulation), level))
 
 
-def build_model(scene, triangulation: str = "type1", level: int | None = None):
-    """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it."""
+def build_model(scene, triangulation: str = "type1", level: int | None = None, limit_analysis: bool = False):
+    """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it: a
+    :class:`~cvxdual.dual.DualModel` (with the scene's friction, if it has any)."""
     from .dual import DualModel
-    return DualModel(build_system(scene, triangulation, level))
+    scene = as_scene(scene)
+    triangulation = check_triangulation(triangulation)
+    model = DualModel(build_system(scene, triangulation, level), triangulation, limit_analysis)
+    if scene.friction is not None:
+        model.add_friction(scene.friction.g)
+    return model
 
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
@@ -84,7 +90,18 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     triangulation = check_triangulation(triangulation)
     stress_space = check_stress_space(stress_space)
     level = check_level(scene.mesh.default_level if level is None else level)
-    if chosen and stress_space == "p0":
+    if scene.friction is not None:
+        if stress_space == "eq" or bounds:
+            raise CvxdualError("the equilibrium stress space and the bounds are frictionless; drop the scene's "
+                               "friction or solve with stress_space='p0' and no bounds",
+                               cli="the equilibrium stress space and the bounds are frictionless; drop the scene's "
+                                   "friction or solve without --stress-space eq and --bounds")
+        if str(solver).upper() == FAST:
+            raise SolverError("the fast path is frictionless; the scene has friction: use solver='CLARABEL'",
+                              cli="the fast path is frictionless; the scene has friction: use --solver CLARABEL")
+        if chosen:
+            solver = DEFAULT_SOLVER  # friction rows measured with Clarabel only
+    if chosen and stress_space == "p0" and scene.friction is None:
         solver = default_solver(mesh_size(scene, level)["triangles"])
     solver = resolve_solver(solver)
     if solver == FAST and solver_options:
@@ -141,11 +158,18 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         t = system.stresses_from_displacement(u)
     else:
         from .dual import DualModel
-        model = DualModel(system)
+        model = DualModel(system, triangulation)
+        if scene.friction is not None:
+            model.add_friction(scene.friction.g)
         t_built = time.perf_counter()
         info = model.solve(solver, **solver_options)
         # CVXPY canonicalises inside solve(); count that as building the problem
         build = t_built - t2 + float(info.get("compile_time") or 0.0)
+        if scene.friction is not None:  # the model's own rows and checks (docs/reformulate.md)
+            sol = model.solution(check)
+            t4 = time.perf_counter()
+            return replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": build,
+                                         "solve": t4 - t2 - build, "recover": 0.0, "error": 0.0, "total": t4 - t0})
         t, u = model.stresses(), model.displacements()
     t4 = time.perf_counter()
     fields = evaluate(system, t, u, info)
@@ -183,20 +207,17 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
     return transfer_active(coarse_x, info["active"], pair_x)
 
 
-def recover(model, triangulation: str, level: int, info: dict, check: bool = True) -> Solution:
-    """The :class:`Solution` of a CVXPY model solved by the caller (``info`` from its ``solve``);
-    the accuracy checks apply only if the user added no constraint."""
-    status = model.problem.status
-    if status is None:
-        raise SolverError("the model has not been solved; call model.solve() (or model.problem.solve()) first")
-    if status != "optimal":
-        raise SolverError(f"the model's last solve ended with status {status!r}, not 'optimal'; there is no "
-                          "solution to recover (see the solver's advice, or try CLARABEL)")
-    fields = evaluate(model.system, model.stresses(), model.displacements(), info)
-    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), **fields)
-    if check and not model.extra:
-        check_solution(sol)
-    return sol
+def recover(model, triangulation: str | None = None, level: int | None = None, info: dict | None = None,
+            check: bool = True) -> Solution:
+    """The :class:`Solution` of a :class:`~cvxdual.dual.DualModel` solved by the caller: the
+    same as ``model.solution(check)`` (the other arguments are kept for old callers and must
+    agree with the model)."""
+    if triangulation is not None and triangulation != model.triangulation:
+        raise CvxdualError(f"the model was built with {model.triangulation}, not {triangulation}; "
+                           "call model.solution()")
+    if level is not None and int(level) != model.system.mesh.level:
+        raise CvxdualError(f"the model is at level {model.system.mesh.level}, not {level}; call model.solution()")
+    return model.solution(check)
 
 
 # -- the equilibrium stress space (docs/equilibrium.md) -----------------------------------
@@ -222,8 +243,11 @@ def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray, blocks: 
     up, lo = system.mesh.pairs.T
     pressure = force / system.width
     xs = x[active]
+    n = len(x)
     return {"x": x, "gap": system.eps, "relative_displacement": v[lo, 1] - v[up, 1], "force": force,
             "pressure": pressure, "active": active, "edge_pressure": p, "n_active": int(active.sum()),
+            # the equilibrium space is frictionless: no tangential force, no pair sticks
+            "tangential_force": np.zeros(n), "slip": v[lo, 0] - v[up, 0], "stick": np.zeros(n, bool),
             "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
             "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
 

@@ -16,10 +16,15 @@ Boundary parts (a scene declares only those it has; undeclared boundary is tract
 The candidate contact interval ``[a, b]`` (``Gamma_K``) lies in both bodies' ``x`` ranges;
 the initial gap is ``eps(x) = f'(x) - f''(x) + g(x)`` with ``g`` an optional gap profile
 (flat faces with ``g(x) = x^2 / (2R)`` are the linearised Hertz geometry).
+
+Contact is frictionless unless the scene has a :class:`Friction`: Tresca friction with slip
+threshold ``g`` (a traction) on the whole candidate interval.
 """
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -215,8 +220,38 @@ class MeshSpec:
 
 
 @dataclass(frozen=True)
+class Friction:
+    """Tresca friction on the candidate contact interval: the tangential traction is at most
+    ``g`` in magnitude, sticking below it and slipping at it (``g = inf``: full stick).
+
+    ``g`` is a traction (force per unit length of the contact face, per unit thickness), in the
+    scene's stress units, acting on every pair of ``[a, b]``, open ones included: Tresca's
+    threshold does not depend on the pressure. Coulomb friction (``|t| <= mu p``) makes the
+    problem non-convex and is not offered."""
+
+    kind: str = "tresca"
+    g: float = field(kw_only=True)  # no sensible default: a threshold must be given
+
+    def __post_init__(self):
+        if self.kind != "tresca":
+            raise SceneError(f"friction kind must be 'tresca', got {short(self.kind)}; Coulomb friction is not "
+                             "convex and is not offered: give kind = \"tresca\" with a slip threshold g")
+        g = self.g
+        if isinstance(g, bool) or not isinstance(g, numbers.Real) or g != g:  # g != g: NaN
+            raise SceneError(f"friction g (the Tresca slip threshold) must be a number >= 0, got {short(g)}; "
+                             "give a traction in the scene's stress units, e.g. g = 100.0, or g = inf for full stick")
+        if g < 0:
+            raise SceneError(f"friction g (the Tresca slip threshold) must be >= 0, got {short(g)}; give its "
+                             "magnitude, a traction in the scene's stress units (0 = frictionless, inf = full stick)")
+        # inf is full stick; every finite value goes through the one number check (range, magnitude)
+        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)")
+        object.__setattr__(self, "g", v)
+
+
+@dataclass(frozen=True)
 class Scene:
-    """Two bodies in (potential) frictionless contact. ``bodies[0]`` is the upper body."""
+    """Two bodies in (potential) contact, frictionless or with Tresca friction (``friction``).
+    ``bodies[0]`` is the upper body."""
 
     name: str
     bodies: tuple[Body, Body]
@@ -226,10 +261,14 @@ class Scene:
     exact: ExactSpec | None = None
     mesh: MeshSpec = field(default_factory=MeshSpec)
     units: tuple[str, str] = ("m", "Pa")
+    friction: Friction | None = None  # None: frictionless
 
     def __post_init__(self):
         text(self.name, "scene name")
         text(self.description, "scene description")
+        if self.friction is not None and not isinstance(self.friction, Friction):
+            raise SceneError(f"scene friction must be a cvxdual.scene.Friction or None, got {short(self.friction)}; "
+                             "give Friction(g=...) (Tresca), or None for frictionless contact")
         if len(self.bodies) != 2:
             raise SceneError(f"a scene has exactly two bodies, got {len(self.bodies)}")
         up, lo = self.bodies
@@ -304,7 +343,8 @@ class Scene:
 
 def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, str]) -> Scene:
     """The same scene in other units: lengths multiplied by ``length``, stresses by ``stress``
-    (forces per unit thickness by ``length * stress``, body forces by ``stress / length``)."""
+    (forces per unit thickness by ``length * stress``, body forces by ``stress / length``; the
+    Tresca threshold is a traction, so by ``stress``)."""
     from .materials import Material
 
     def prof(p: Profile | None):
@@ -336,5 +376,8 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
         ex = replace(ex, stress=None if ex.stress is None else tuple(v * stress for v in ex.stress),
                      R=None if ex.R is None else ex.R * length,
                      load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length)
+    fr = scene.friction
+    if fr is not None:
+        fr = replace(fr, g=fr.g * stress)  # inf stays inf: full stick in any units
     return replace(scene, bodies=bodies, contact=ival(scene.contact), gap=prof(scene.gap), exact=ex,
-                   mesh=replace(scene.mesh, focus=ival(scene.mesh.focus)), units=tuple(units))
+                   mesh=replace(scene.mesh, focus=ival(scene.mesh.focus)), units=tuple(units), friction=fr)

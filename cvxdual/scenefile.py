@@ -16,14 +16,15 @@ from pathlib import Path
 from .errors import SceneError
 from .materials import Material
 from .profiles import profile_from_dict
-from .scene import Body, BoundaryPart, ExactSpec, MeshSpec, Scene, Traction
+from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
 from .validate import integer, number, short, table, text
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
 PART_KEYS = {"on", "kind", "traction", "interval"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
-CONTACT_KEYS = {"interval", "gap"}
+CONTACT_KEYS = {"interval", "gap", "friction"}
+FRICTION_KEYS = {"kind", "g"}
 EXACT_KEYS = {"kind", "stress", "R", "load", "xc"}
 MESH_KEYS = {"columns", "focus", "grading", "default_level"}
 TRACTION_KEYS = {"kind", "value"}
@@ -177,6 +178,7 @@ def scene_from_dict(data: dict) -> Scene:
     bodies = tuple(_body(name, bd, plane) for name, bd in bodies_d.items())
     contact = _check_keys(data.get("contact", {}), CONTACT_KEYS, "contact")
     gap = profile_from_dict(contact["gap"], "contact.gap") if "gap" in contact else None
+    friction = _friction(contact["friction"]) if "friction" in contact else None
     exact = None
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
@@ -187,7 +189,19 @@ def scene_from_dict(data: dict) -> Scene:
                     grading=number(m.get("grading", 1.0), "mesh.grading"),
                     default_level=integer(m.get("default_level", 3), "mesh.default_level"))
     return Scene(name=data.get("name", "scene"), bodies=bodies, description=data.get("description", ""),
-                 contact=contact.get("interval"), gap=gap, exact=exact, mesh=mesh, units=tuple(units))  # Scene checks
+                 contact=contact.get("interval"), gap=gap, exact=exact, mesh=mesh, units=tuple(units),
+                 friction=friction)  # Scene checks
+
+
+def _friction(d) -> Friction:
+    """``[contact] friction = { kind = "tresca", g = ... }``; ``kind`` defaults to tresca, so
+    ``--set contact.friction.g=100`` gives a frictionless scene friction."""
+    _check_keys(d, FRICTION_KEYS, "contact.friction")
+    kind = d.get("kind", "tresca")
+    if "g" not in d and kind == "tresca":  # another kind: Friction's error on the kind says more
+        raise SceneError("contact.friction: missing key 'g'; give the Tresca slip threshold, a traction in the "
+                         "scene's stress units, e.g. friction = { g = 100.0 } (g = inf: full stick)")
+    return Friction(kind=kind, g=d.get("g"))
 
 
 def _body(name: str, d: dict, plane: str) -> Body:

@@ -64,6 +64,8 @@ class Solution:
     exact: dict | None
     error: dict | None
     bounds: dict | None = None  # certified bounds (docs/equilibrium.md), where computed
+    # the checks applied ({name: residual}) and skipped ({name: reason}); None: all of tolerances()
+    checks: dict | None = None
     space: object | None = None  # the EquilibriumSpace of an "eq" solution or of the bounds
 
     @property
@@ -105,6 +107,7 @@ class Solution:
             "exact": self.exact,
             "error": self.error,
             "bounds": None if self.bounds is None else {k: self.bounds[k] for k in BOUND_KEYS},
+            "checks_skipped": {} if self.checks is None else dict(self.checks["skipped"]),
             "timings": dict(self.timings),
         }
 
@@ -119,23 +122,41 @@ def admissibility(system: System, t: np.ndarray):
     return R, scale
 
 
-def contact_quantities(system: System, R: np.ndarray, u: np.ndarray) -> dict:
-    """Nodal contact forces, pressures, gaps and the active set, from the residual
-    ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``."""
+def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=None, adhesion=None) -> dict:
+    """Nodal contact forces, pressures, gaps, the active set and the tangential state, from
+    the residual ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``.
+
+    ``friction`` (Tresca ``g`` per pair) and ``adhesion`` (``sigma_a`` per pair) are those of
+    the problem solved: a pair is active where its force exceeds ``-sigma_a w`` and sticks
+    where it is active and its tangential force is below ``g w`` (each judged, like the
+    normal state, against the slip relative to its scale)."""
     force = -R[system.jb]
     up, lo = system.mesh.pairs.T
-    rel = u[2 * lo + 1] - u[2 * up + 1]
+    q = u.reshape(-1, 2)
+    rel = q[lo, 1] - q[up, 1]
     pressure = force / system.width
-    fmax = max(float(force.max()) if len(force) else 0.0, FORCE_FLOOR * load_scale(system))
+    held = force if adhesion is None else force + adhesion * system.width  # force above the cut-off
+    fmax = max(float(held.max()) if len(held) else 0.0, FORCE_FLOOR * load_scale(system))
     delta = max(float(np.abs(u).max()), float(np.abs(system.eps).max()), system.scales.displacement)
     opening = system.eps - rel
     # complementarity makes force or opening zero; an interior point leaves both small, and the
     # larger of the two (each relative to its scale) tells the state
-    active = (force > ACTIVE_TOL * fmax) & (force / fmax > opening / delta)
+    active = (held > ACTIVE_TOL * fmax) & (held / fmax > opening / delta)
+    jxa, jxb = system.rdof[2 * up], system.rdof[2 * lo]
+    slides = (jxa >= 0) & (jxb >= 0)
+    tangential = np.where(slides, R[np.where(slides, jxb, 0)], 0.0)  # R''_x(B_k): x force on the lower body
+    slip = q[lo, 0] - q[up, 0]
+    if friction is None:
+        stick = np.zeros(len(force), bool)
+    else:
+        with np.errstate(invalid="ignore"):  # g = inf: the reserve is inf, the pair sticks
+            reserve = (friction * system.width - np.abs(tangential)) / fmax
+        stick = active & slides & (reserve > np.abs(slip) / delta)
     xs = system.mesh.pair_x[active]
     return {
         "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
         "force": force, "pressure": pressure, "active": active,
+        "tangential_force": tangential, "slip": slip, "stick": stick,
         "reaction": R[system.ja],  # y force on the upper body: +force (action = reaction)
         "n_active": int(active.sum()),
         "x_min": float(xs.min()) if len(xs) else None,
@@ -173,14 +194,28 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=N
     den = np.sqrt(np.sum(a * VOIGT_WEIGHT * t**2))
     # floors: the problem's own stress and displacement scales (an unloaded scene has t = u = 0)
     cons = float(num / max(den, 1e-12 * sc.stress * sc.length))
+    return {"equilibrium": eq, "constitutive": cons, "complementarity": complementarity(system, u, contact),
+            "penetration": penetration(system, u, contact), "duality_gap": duality_gap(system, t, u)}
+
+
+def _delta(system: System, u: np.ndarray, contact: dict) -> float:
+    """The displacement scale: the largest displacement or gap (floored by the problem's)."""
+    return max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), system.scales.displacement)
+
+
+def complementarity(system: System, u: np.ndarray, contact: dict, force: np.ndarray | None = None) -> float:
+    """``sum |F_k s_k| / (sum |F_k| delta)`` with the openings ``s_k``; ``force`` replaces
+    ``contact["force"]`` (adhesion: the force above the cut-off)."""
+    F = contact["force"] if force is None else force
     s = contact["gap"] - contact["relative_displacement"]
-    delta = max(float(np.abs(u).max()), float(np.abs(contact["gap"]).max()), sc.displacement)
-    F = contact["force"]
-    fsum = max(float(np.abs(F).sum()), FORCE_FLOOR * f_ref)
-    comp = float(np.sum(np.abs(F * s)) / (fsum * delta))
-    pen = float(max(0.0, -s.min()) / delta) if len(s) else 0.0
-    return {"equilibrium": eq, "constitutive": cons, "complementarity": comp, "penetration": pen,
-            "duality_gap": duality_gap(system, t, u)}
+    fsum = max(float(np.abs(F).sum()), FORCE_FLOOR * load_scale(system))
+    return float(np.sum(np.abs(F * s)) / (fsum * _delta(system, u, contact)))
+
+
+def penetration(system: System, u: np.ndarray, contact: dict) -> float:
+    """``max(0, -min_k s_k) / delta``."""
+    s = contact["gap"] - contact["relative_displacement"]
+    return float(max(0.0, -s.min()) / _delta(system, u, contact)) if len(s) else 0.0
 
 
 def dual_objective(system: System, t: np.ndarray) -> float:
@@ -189,24 +224,25 @@ def dual_objective(system: System, t: np.ndarray) -> float:
     return 0.5 * float(tv @ (system.Ah @ tv)) - float(tv @ (system.E.T @ system.q0))
 
 
-def duality_gap(system: System, t: np.ndarray, u: np.ndarray) -> float:
+def duality_gap(system: System, t: np.ndarray, u: np.ndarray, extra: float = 0.0) -> float:
     """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy
-    (docs/theory.md#primal-and-dual-problems)."""
+    (docs/theory.md#primal-and-dual-problems); ``extra`` is what a reformulation adds to ``J``
+    (friction dissipation, adhesion work)."""
     tv = t.ravel()
     energy = 0.5 * float(tv @ (system.Ah @ tv))
     objective = energy - float(tv @ (system.E.T @ system.q0))
     sc = system.scales
-    val = system.energy(u) + float(system.f @ system.q0) + objective
+    val = system.energy(u) + extra + float(system.f @ system.q0) + objective
     return abs(val) / max(energy, abs(objective), 1e-12 * sc.stress**2 * sc.length**2 / sc.modulus)
 
 
-def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict) -> dict:
+def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict, friction=None, adhesion=None) -> dict:
     """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
     displacements ``u``: every field of a :class:`Solution` that the solve itself does not give,
     and ``timings["error"]``, the time of the error against the exact field."""
     scene = system.mesh.scene
     adm = admissibility(system, t)
-    contact = contact_quantities(system, adm[0], u)
+    contact = contact_quantities(system, adm[0], u, friction, adhesion)
     res = residuals(system, t, u, contact, adm)
     exact = exact_field(scene)
     error, t0 = None, time.perf_counter()
@@ -226,7 +262,8 @@ def tolerances(sol: Solution) -> dict:
 
 def check_solution(sol: Solution) -> None:
     tol = tolerances(sol)
-    bad = {k: v for k, v in sol.residuals.items() if k in tol and v > tol[k]}
+    applied = sol.residuals if sol.checks is None else sol.checks["applied"]
+    bad = {k: v for k, v in applied.items() if k in tol and v > tol[k]}
     if bad:
         txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
         name = str(sol.solver.get("solver"))

@@ -5,6 +5,8 @@ from __future__ import annotations
 import time
 import warnings
 
+import numpy as np
+
 from .errors import SolverError, UnknownSolverError
 from .validate import one_line
 
@@ -25,6 +27,11 @@ SOLVER_OPTIONS: dict[str, dict] = {
     "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200000},
     "PIQP": {}, "PROXQP": {}, "ECOS": {}, "CVXOPT": {}, "HIGHS": {}, "QOCO": {}, "DAQP": {},
 }
+
+
+# the option each solver reads as a wall-clock limit in seconds; the others have none (PIQP and
+# ECOS reject the name, QOCO, ProxQP and CVXOPT ignore it), so a time limit is refused there
+TIME_LIMIT_OPTION = {"CLARABEL": "time_limit", "SCS": "time_limit_secs", "OSQP": "time_limit"}
 
 
 def default_solver(n_pieces: float) -> str:
@@ -64,18 +71,35 @@ _ADVICE = {
 }
 
 
-def solve_problem(problem, solver: str, what: str, **options) -> dict:
-    """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`."""
+def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
+                  verbose: bool = False, **options) -> dict:
+    """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`.
+
+    ``advice`` replaces the advice given for a status (e.g. a model that knows the user's
+    changes names them); ``time_limit`` (seconds) is passed as the solver's own option
+    (:data:`TIME_LIMIT_OPTION`); ``verbose`` prints the solver's log.
+    """
     import cvxpy as cp
     opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
+    if time_limit is not None:
+        if solver not in TIME_LIMIT_OPTION:
+            raise SolverError(f"{what}: solver {solver} has no time limit; use one of "
+                              f"{', '.join(TIME_LIMIT_OPTION)} or drop time_limit")
+        if isinstance(time_limit, bool) or not (float(time_limit) > 0 and np.isfinite(float(time_limit))):
+            raise SolverError(f"{what}: time_limit must be a positive number of seconds, got {time_limit!r}")
+        opts[TIME_LIMIT_OPTION[solver]] = float(time_limit)
     t0 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             # an inaccurate status becomes a SolverError below, with advice: CVXPY's warning repeats it
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            problem.solve(solver=solver, **opts)
+            problem.solve(solver=solver, verbose=bool(verbose), **opts)
     except cp.error.SolverError as e:
-        raise SolverError(f"{what}: solver {solver} failed ({str(e).splitlines()[0] if str(e) else 'no message'}); "
+        msg = one_line(e, 200) if str(e) else "no message"
+        if "nrecognized" in msg or "invalid keyword" in msg:  # OSQP names unknown settings this way
+            raise SolverError(f"{what}: solver {solver} rejected the options {sorted(options)} ({msg}); "
+                              "check their names and types in the solver's documentation") from None
+        raise SolverError(f"{what}: solver {solver} failed ({msg}); "
                           "try another solver (e.g. CLARABEL) or a coarser mesh") from None
     except (TypeError, ValueError) as e:  # solvers reject unknown or ill-typed options this way
         msg = one_line(e, 200)
@@ -84,8 +108,12 @@ def solve_problem(problem, solver: str, what: str, **options) -> dict:
     wall = time.perf_counter() - t0
     status = problem.status
     if status != cp.OPTIMAL:
-        advice = _ADVICE.get(status, "try another solver")
-        raise SolverError(f"{what}: solver {solver} returned status '{status}': {advice}")
+        if time_limit is not None and wall >= time_limit and status in ("user_limit", "optimal_inaccurate"):
+            # SCS reports a time-out as 'optimal_inaccurate'
+            raise SolverError(f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s "
+                              f"(status '{status}'); raise time_limit or try a coarser mesh")
+        text = (advice or {}).get(status) or _ADVICE.get(status, "try another solver")
+        raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}")
     stats = problem.solver_stats
     return {
         "status": status,

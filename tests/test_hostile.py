@@ -183,7 +183,7 @@ def test_api_raises_cvxdual_errors(call, error):
 
 def test_recover_needs_a_solved_model():
     model = cd.build_model("patch", level=0)
-    with pytest.raises(cd.SolverError, match="not been solved"):
+    with pytest.raises(cd.ModelError, match="not been solved"):
         cd.recover(model, "type1", 0, {})
     info = model.solve("CLARABEL")
     sol = cd.recover(model, "type1", 0, info)  # and once solved it works

@@ -1,0 +1,42 @@
+"""Stress measures per piece: in-plane maximum shear and von Mises with ``s33``.
+
+In plane strain ``e33 = 0`` gives ``s33 = nu (s11 + s22)``; in plane stress ``s33 = 0``. The
+numpy functions here are the twins of the CVXPY expressions of :class:`cvxdual.DualModel`
+(``shear_stress()``, ``von_mises()``), so a result can be checked against what was capped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ModelError
+
+
+def out_of_plane_factor(system) -> np.ndarray:
+    """``(n_pieces,)`` factor ``c`` with ``s33 = c (s11 + s22)``: ``nu`` of the piece's body in
+    plane strain, 0 in plane stress. A body given by its Hooke matrix alone has no ``nu``."""
+    c = []
+    for body in system.mesh.scene.bodies:
+        m = body.material
+        if m.plane == "stress":
+            c.append(0.0)
+        elif m.nu is None:
+            raise ModelError(f"body {body.name!r} has a Hooke matrix but no Poisson ratio, so s33 (and von Mises) "
+                             "is not defined in plane strain; give the material as E and nu")
+        else:
+            c.append(float(m.nu))
+    return np.asarray(c)[system.pieces.body]
+
+
+def shear_stress(stress: np.ndarray) -> np.ndarray:
+    """In-plane maximum shear ``sqrt(((s11 - s22)/2)^2 + s12^2)`` of Voigt stresses ``(n, 3)``."""
+    s = np.asarray(stress)
+    return np.hypot(0.5 * (s[:, 0] - s[:, 1]), s[:, 2])
+
+
+def von_mises(stress: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """Von Mises stress of Voigt stresses ``(n, 3)`` with ``s33 = factor (s11 + s22)``."""
+    s = np.asarray(stress)
+    s33 = factor * (s[:, 0] + s[:, 1])
+    d = np.stack([s[:, 0] - s[:, 1], s[:, 1] - s33, s33 - s[:, 0], np.sqrt(6.0) * s[:, 2]])
+    return np.sqrt(0.5 * np.sum(d**2, axis=0))
