@@ -66,8 +66,9 @@ def _per_pair(value, n_pairs: int, what: str, fix: str):
     try:
         arr = np.broadcast_to(np.asarray(value, dtype=float), (n_pairs,)).copy()
     except (TypeError, ValueError):
-        raise ModelError(f"{what} must be a number or one value per contact pair ({n_pairs}), "
-                         f"got {np.shape(value) if hasattr(value, '__len__') else type(value).__name__}; {fix}") from None
+        got = np.shape(value) if hasattr(value, "__len__") else type(value).__name__
+        raise ModelError(f"{what} must be a number or one value per contact pair ({n_pairs}), got {got}; "
+                         f"{fix}") from None
     if isinstance(value, bool) or np.isnan(arr).any() or (arr < 0).any():
         raise ModelError(f"{what} must be non-negative numbers (inf allowed), got {value!r}; {fix}")
     return arr
@@ -99,7 +100,7 @@ class DualModel:
         self.limit_analysis = bool(limit_analysis)
         sc = system.scales
         L, E0, s0 = sc.length, sc.modulus, sc.stress
-        n_r, n_p = system.n_r, system.n_pieces
+        n_p = system.n_pieces
         ZT = system.Z.T.tocsr()
         self._H = (system.T.T @ (ZT @ system.E)).tocsr() / L  # rows: T^T R / (s0 L) per unit t
         self._h = (system.T.T @ (ZT @ system.f)) / (s0 * L)
@@ -156,11 +157,9 @@ class DualModel:
         tangential = fric | stick  # R'_x(A) + R''_x(B) = 0 replaces both x rows
         drop = self._jxb[tangential]
         eq_rows = np.setdiff1d(self.J0, drop)
-        P = _selector(eq_rows, n_r).tolil()
-        where = {int(r): i for i, r in enumerate(eq_rows)}
-        for a, b in zip(self._jxa[tangential], self._jxb[tangential]):
-            P[where[int(a)], int(b)] = 1.0  # action = reaction of the tangential forces
-        P = P.tocsr()
+        # row R'_x(A_k) of each such pair also takes R''_x(B_k): tangential action = reaction
+        at = np.searchsorted(eq_rows, self._jxa[tangential])
+        P = _selector(eq_rows, n_r) + sp.csr_matrix((np.ones(len(at)), (at, drop)), shape=(len(eq_rows), n_r))
         jb = self.Jm
         blocks = {"equilibrium": (P, "==", 0.0), "contact": (_selector(jb, n_r), "<=",
                                                              0.0 if self._sigma_a is None else
@@ -248,9 +247,11 @@ class DualModel:
         """Replace the objective (a ``cp.Minimize`` or ``cp.Maximize``), kept until set again.
         :attr:`complementary_energy` is the default one in physical units."""
         if not isinstance(objective, (cp.Minimize, cp.Maximize)):
-            raise ModelError(f"set_objective takes cp.Minimize(...) or cp.Maximize(...), got {type(objective).__name__}")
+            raise ModelError("set_objective takes cp.Minimize(...) or cp.Maximize(...), "
+                             f"got {type(objective).__name__}")
         if not objective.is_dcp():
-            raise ModelError("the objective is not convex (not DCP): minimise a convex or maximise a concave expression")
+            raise ModelError("the objective is not convex (not DCP): minimise a convex or maximise a concave "
+                             "expression")
         self._objective = objective
         self._changed()
         return self
@@ -454,7 +455,8 @@ class DualModel:
         for M, sense, bound in self._blocks.values():
             b = np.asarray(bound.value if isinstance(bound, cp.Expression) else bound, float)
             r = M @ rows - b
-            worst = max(worst, float(np.abs(r).max(initial=0.0) if sense == "==" else np.maximum(r, 0).max(initial=0.0)))
+            r = np.abs(r) if sense == "==" else np.maximum(r, 0.0)
+            worst = max(worst, float(r.max(initial=0.0)))
         applied["equilibrium"] = worst / floor
         if self._user:
             applied["user_constraints"] = max(self._violation(c) for _, c in self._user)

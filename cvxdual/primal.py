@@ -4,6 +4,8 @@
 ``K_r = Z^T K Z``, ``K = E A_h^-1 E^T``, ``g = Z^T f``; floating rigid motions are fixed at the
 same anchor dofs the dual drops. Its stresses ``C_P B_P u_h`` must equal the dual's ``lam_h``.
 Solved independently of the dual (its own CVXPY problem), in the same scaled units.
+``stick`` (a boolean per pair) adds ``r''_x(B_k) - r'_x(A_k) = 0`` (no slip) at those pairs whose
+``x`` dofs are free: the limit ``g -> inf`` of the dual's Tresca friction on them.
 """
 
 from __future__ import annotations
@@ -12,11 +14,16 @@ import cvxpy as cp
 import numpy as np
 
 from .assembly import System
+from .errors import ModelError
 from .solvers import solve_problem
 
 
 class PrimalModel:
-    def __init__(self, system: System):
+    """The displacement QP of ``system``; ``stick`` (``(n_pairs,)`` booleans) ties the
+    tangential displacements of those pairs (named constraint ``stick``; pairs whose ``x`` dofs
+    are fixed have no slip unknown and are skipped)."""
+
+    def __init__(self, system: System, stick=None):
         self.system = system
         sc = system.scales
         delta = sc.displacement
@@ -25,6 +32,17 @@ class PrimalModel:
         g = (Z.T @ system.f) / (sc.stress * sc.length)
         self.r = cp.Variable(system.n_r, name="r")
         cons = {"contact": self.r[system.jb] - self.r[system.ja] <= system.eps / delta}
+        if stick is not None:
+            n_pairs = len(system.mesh.pairs)
+            mask = np.asarray(stick)
+            if mask.dtype != bool or mask.shape != (n_pairs,):
+                raise ModelError(f"stick must be {n_pairs} booleans (one per contact pair), got "
+                                 f"{mask.dtype} of shape {mask.shape}")
+            up, lo = system.mesh.pairs.T
+            jxa, jxb = system.rdof[2 * up], system.rdof[2 * lo]
+            k = mask & (jxa >= 0) & (jxb >= 0)
+            if k.any():
+                cons["stick"] = self.r[jxb[k]] - self.r[jxa[k]] == 0
         if len(system.anchors):
             cons["anchors"] = self.r[system.anchors] == 0
         self.constraints = cons

@@ -87,6 +87,9 @@ class Solution:
             "stress_space": self.stress_space,
             "level": self.level,
             "units": {"length": self.scene.units[0], "stress": self.scene.units[1]},
+            "friction": None if self.scene.friction is None else  # JSON has no inf: full stick as "inf"
+            {"kind": self.scene.friction.kind, "g": self.scene.friction.g if np.isfinite(self.scene.friction.g)
+             else "inf"},
             "n_pieces": 3 * self.space.n_tri if eq else s.n_pieces,
             "piece_kinds": {"sub_triangle": 3 * self.space.n_tri} if eq else s.pieces.counts(),
             "n_stress_unknowns": self.space.n_y if eq else 3 * s.n_pieces,

@@ -30,7 +30,7 @@ CHOICES = {"on": ("face", "far", "left", "right"), "position": ("upper", "lower"
            "exact": ("uniform", "hertz"), "part": ("clamped", "sliding", "traction")}
 # where summary() documents null: no exact field / error / bounds, no active pair, no iteration count
 NULLABLE = {"exact", "error", "bounds", "contact.x_min", "contact.x_max", "iterations", "bounds.data_oscillation",
-            "fallback", "error.effectivity"}
+            "fallback", "error.effectivity", "friction"}
 
 
 def nodes(d, prefix=()):

@@ -17,3 +17,11 @@ def test_python_example_runs():
     readme = (ROOT / "README.md").read_text()
     code = re.search(r"```python\n(.*?)```", readme, re.S).group(1)
     exec(compile(code, "README.md", "exec"), {})
+
+
+def test_reformulate_page_examples_run():
+    page = (ROOT / "docs" / "reformulate.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", page, re.S)
+    assert blocks
+    for code in blocks:
+        exec(compile(code, "docs/reformulate.md", "exec"), {})
