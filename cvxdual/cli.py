@@ -11,6 +11,8 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from .errors import CvxdualError
 from .solvers import LARGE_QP
 from .validate import one_line
@@ -39,6 +41,14 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
          else f"residuals: admissibility {r['admissibility']:.1e} (exact to rounding), penetration "
          f"{r['penetration']:.1e}; relative gap G {s['duality_gap']:.1e}"),
     ]
+    if sol.scene.friction is not None:
+        k = sol.contact
+        slipping = int((k["active"] & ~k["stick"] & (k["slip"] != 0)).sum())
+        lines.append(f"friction: Tresca g = {_fmt(sol.scene.friction.g)} {S}; {int(k['stick'].sum())} active pairs "
+                     f"stick, {slipping} slip; largest tangential force {_fmt(np.abs(k['tangential_force']).max())} "
+                     f"{S}*{L}")
+    for name, why in s["checks_skipped"].items():
+        lines.append(f"not checked: {name} ({why})")
     if s["fallback"]:
         lines.append(f"note: {s['fallback']}")
     if s["exact"] and s["exact"].get("kind") == "hertz":
@@ -98,7 +108,7 @@ def _cmd_study(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
-                                "contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
+                                "(or Tresca) contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(func=_cmd_scenes)
     s = sub.add_parser("solve", help="solve a scene and write its outputs")

@@ -217,9 +217,9 @@ class DualModel:
             out.append("set_objective")
         out += [f"add_constraint {name!r}" for name, _ in self._user]
         if self._g is not None:
-            out.append("add_friction")
+            out.append("Tresca friction")
         if self._sigma_a is not None:
-            out.append("allow_adhesion")
+            out.append("adhesion")
         return out
 
     # -- changes ------------------------------------------------------------------------
@@ -407,6 +407,9 @@ class DualModel:
     def value(self, expression) -> np.ndarray:
         """The value of an expression of this model at the last solve."""
         self._require_solved()
+        if not set(expression.variables()) <= set(self.problem.variables()):
+            raise ModelError("the expression uses variables that are not in this model's problem; build it from "
+                             "this model's handles (model.stress, model.contact_force, ...)")
         return np.asarray(expression.value, dtype=float)
 
     def solution(self, check: bool = True) -> Solution:
@@ -420,7 +423,8 @@ class DualModel:
         t, u = self.stresses(), self.displacements()
         g = self._numeric(self._g)
         sigma_a = self._numeric(self._sigma_a)
-        fields = evaluate(system, t, u, dict(self.info), friction=g, adhesion=sigma_a)
+        fields = evaluate(system, t, u, dict(self.info), friction=g, adhesion=sigma_a,
+                          displacements=self._elastic())
         fields.pop("timings")
         applied, skipped = self._checks(system, t, u, fields, g, sigma_a, lf)
         if "error" in skipped:
@@ -445,6 +449,11 @@ class DualModel:
         n = len(self._slides)
         return np.broadcast_to(np.asarray(value.value if isinstance(value, cp.Parameter) else value, float), (n,))
 
+    def _elastic(self) -> bool:
+        """Whether the multipliers are the displacements of an elastic problem: the default
+        objective and no added constraint (friction, adhesion and load_factor keep it)."""
+        return self._objective is self._default and not self._user and not self.limit_analysis
+
     def _checks(self, system, t, u, fields, g, sigma_a, lf) -> tuple[dict, dict]:
         """The residuals that hold for this model (see :meth:`solution`) and the skipped ones."""
         applied, skipped = {}, {}
@@ -460,7 +469,7 @@ class DualModel:
         applied["equilibrium"] = worst / floor
         if self._user:
             applied["user_constraints"] = max(self._violation(c) for _, c in self._user)
-        standard = self._objective is self._default and not self._user and not self.limit_analysis
+        standard = self._elastic()
         why = ("the objective was changed" if self._objective is not self._default else
                "limit analysis has no elastic law" if self.limit_analysis else
                "user constraints change the optimality conditions" if self._user else "")
@@ -474,6 +483,8 @@ class DualModel:
         else:
             for k in ("constitutive", "complementarity", "penetration", "duality_gap"):
                 skipped[k] = f"{why}: the multipliers are not the displacements of an elastic solution"
+            skipped["displacement"] = ("the displacement, relative displacements and slips are the multipliers "
+                                       "mapped as displacements; the contact zone is judged by the forces alone")
         if fields["exact"] is not None and (lf != 1.0 or self.changes()):
             skipped["error"] = ("the exact field is for the scene's own problem, not for "
                                 + ("load_factor != 1" if lf != 1.0 else ", ".join(self.changes())))

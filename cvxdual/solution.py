@@ -125,7 +125,8 @@ def admissibility(system: System, t: np.ndarray):
     return R, scale
 
 
-def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=None, adhesion=None) -> dict:
+def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=None, adhesion=None,
+                       displacements: bool = True) -> dict:
     """Nodal contact forces, pressures, gaps, the active set and the tangential state, from
     the residual ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``.
 
@@ -144,12 +145,14 @@ def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=No
     opening = system.eps - rel
     # complementarity makes force or opening zero; an interior point leaves both small, and the
     # larger of the two (each relative to its scale) tells the state
-    active = (held > ACTIVE_TOL * fmax) & (held / fmax > opening / delta)
+    active = held > ACTIVE_TOL * fmax
+    if displacements:
+        active &= held / fmax > opening / delta
     jxa, jxb = system.rdof[2 * up], system.rdof[2 * lo]
     slides = (jxa >= 0) & (jxb >= 0)
     tangential = np.where(slides, R[np.where(slides, jxb, 0)], 0.0)  # R''_x(B_k): x force on the lower body
     slip = q[lo, 0] - q[up, 0]
-    if friction is None:
+    if friction is None or not displacements:
         stick = np.zeros(len(force), bool)
     else:
         with np.errstate(invalid="ignore"):  # g = inf: the reserve is inf, the pair sticks
@@ -239,13 +242,15 @@ def duality_gap(system: System, t: np.ndarray, u: np.ndarray, extra: float = 0.0
     return abs(val) / max(energy, abs(objective), 1e-12 * sc.stress**2 * sc.length**2 / sc.modulus)
 
 
-def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict, friction=None, adhesion=None) -> dict:
+def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict, friction=None, adhesion=None,
+             displacements: bool = True) -> dict:
     """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
     displacements ``u``: every field of a :class:`Solution` that the solve itself does not give,
-    and ``timings["error"]``, the time of the error against the exact field."""
+    and ``timings["error"]``, the time of the error against the exact field (``friction``,
+    ``adhesion``, ``displacements``: see :func:`contact_quantities`)."""
     scene = system.mesh.scene
     adm = admissibility(system, t)
-    contact = contact_quantities(system, adm[0], u, friction, adhesion)
+    contact = contact_quantities(system, adm[0], u, friction, adhesion, displacements)
     res = residuals(system, t, u, contact, adm)
     exact = exact_field(scene)
     error, t0 = None, time.perf_counter()
