@@ -22,6 +22,7 @@ are the displacements (slips included), recovered as ``u_h = Z (r0 - delta T y)`
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import cvxpy as cp
@@ -126,6 +127,7 @@ class DualModel:
         self._version = 0  # bumped by every change of the problem
         self._solved = None  # (version, parameter values, solver, options) of the last solve
         self._problem = None
+        self._rhs = None  # (key, data, chain, inverse data, b0, b1): re-solves that change load_factor only
         self.info: dict = {}
         self._build()
 
@@ -372,9 +374,68 @@ class DualModel:
                                    f"({what}); bound it with constraints",
                       "unbounded_inaccurate": f"the objective looks unbounded with your changes ({what}); "
                                               "bound it with constraints"}
-        self.info = solve_problem(self.problem, solver, "dual QP", advice, time_limit, verbose, **options)
+        self.info = solve_problem(self.problem, solver, "dual QP", advice, time_limit, verbose,
+                                  run=self._runner(solver, verbose), **options)
         self._solved = key
         return self.info
+
+    def _runner(self, solver: str, verbose: bool):
+        """``run(opts)`` for :func:`solve_problem`: CVXPY's solve, except when only ``load_factor``
+        changed since the last solve of this problem. The solver's data then differ in ``b`` only,
+        ``b = b0 + load_factor b1`` (DPP: affine in the parameter), and the solver is called on the
+        cached data with that ``b``: CVXPY's recompile (the parameter applied to the whole canonical
+        tensor, ``O(nnz)``) is skipped. ``b0``, ``b1`` come from two of CVXPY's cached compiles (at
+        0 and 1) at the second such solve, which also checks that nothing but ``b`` changes."""
+        problem = self.problem
+        lf = self.load_factor
+
+        def run(opts: dict) -> float:
+            others = tuple(np.asarray(p.value).tobytes() for p in problem.parameters() if p is not lf)
+            key = (self._version, others, solver, repr(sorted(opts.items())))
+            state = self._rhs if self._rhs is not None and self._rhs[0] == key else None
+            if self.limit_analysis or state is None or state[1] is False:
+                problem.solve(solver=solver, verbose=bool(verbose), **opts)
+                if state is None:
+                    self._rhs = (key, None)  # the next solve with this key builds the affine b
+                return problem.compilation_time
+            t0 = time.perf_counter()
+            if state[1] is None:
+                parts = self._affine_rhs(problem, solver, opts)
+                if parts is None:  # load_factor is not in b alone: CVXPY from now on
+                    self._rhs = (key, False)
+                    problem.solve(solver=solver, verbose=bool(verbose), **opts)
+                    return problem.compilation_time
+                self._rhs = state = (key, *parts)
+            _, data, chain, inverse, b0, b1 = state
+            data = {**data, "b": b0 + float(lf.value) * b1}
+            compile_time = time.perf_counter() - t0
+            problem.unpack_results(chain.solve_via_data(problem, data, False, bool(verbose), opts), chain, inverse)
+            return compile_time
+
+        return run
+
+    def _affine_rhs(self, problem, solver: str, opts: dict):
+        """``(data at load_factor 0, chain, inverse data, b0, b1)`` with ``b1 = b(1) - b(0)``, or
+        ``None`` unless the solver takes conic data and ``b`` alone depends on ``load_factor`` (a
+        user's constraint may multiply a variable by it)."""
+        from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
+        lf = self.load_factor
+        value = lf.value
+        try:
+            lf.value = 0.0
+            data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
+            lf.value = 1.0
+            one = problem.get_problem_data(solver, solver_opts=opts)[0]
+        finally:
+            lf.value = value
+        if not isinstance(chain.solver, ConicSolver):
+            return None
+        for k, v in data.items():
+            w = one[k]
+            changed = (v != w).nnz if sp.issparse(v) else isinstance(v, np.ndarray) and not np.array_equal(v, w)
+            if k != "b" and changed:
+                return None
+        return data, chain, inverse, data["b"], one["b"] - data["b"]
 
     def _require_solved(self) -> None:
         if self._solved is None:

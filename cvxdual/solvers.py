@@ -72,12 +72,13 @@ _ADVICE = {
 
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
-                  verbose: bool = False, **options) -> dict:
+                  verbose: bool = False, run=None, **options) -> dict:
     """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`.
 
     ``advice`` replaces the advice given for a status (e.g. a model that knows the user's
     changes names them); ``time_limit`` (seconds) is passed as the solver's own option
-    (:data:`TIME_LIMIT_OPTION`); ``verbose`` prints the solver's log.
+    (:data:`TIME_LIMIT_OPTION`); ``verbose`` prints the solver's log. ``run(opts)``, if given,
+    solves ``problem`` in place of ``problem.solve`` and returns the compile time it spent.
     """
     import cvxpy as cp
     opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
@@ -93,7 +94,11 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
         with warnings.catch_warnings():
             # an inaccurate status becomes a SolverError below, with advice: CVXPY's warning repeats it
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            problem.solve(solver=solver, verbose=bool(verbose), **opts)
+            if run is None:
+                problem.solve(solver=solver, verbose=bool(verbose), **opts)
+                compile_time = getattr(problem, "compilation_time", None)
+            else:
+                compile_time = run(opts)
     except cp.error.SolverError as e:
         msg = one_line(e, 200) if str(e) else "no message"
         if "nrecognized" in msg or "invalid keyword" in msg:  # OSQP names unknown settings this way
@@ -121,6 +126,6 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
         "iterations": getattr(stats, "num_iters", None),
         "solve_time": getattr(stats, "solve_time", None),
         "setup_time": getattr(stats, "setup_time", None),
-        "compile_time": getattr(problem, "compilation_time", None),
+        "compile_time": compile_time,
         "wall": wall,
     }
