@@ -22,7 +22,6 @@ are the displacements (slips included), recovered as ``u_h = Z (r0 - delta T y)`
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 
 import cvxpy as cp
@@ -32,6 +31,7 @@ import scipy.sparse as sp
 from .assembly import System
 from .errors import AccuracyError, ModelError
 from .invariants import out_of_plane_factor
+from .modelling import USER_TOLERANCE, ConvexModel
 from .solution import (
     TOLERANCES,
     Solution,
@@ -42,11 +42,6 @@ from .solution import (
     load_scale,
     penetration,
 )
-from .solvers import DEFAULT_SOLVER, resolve_solver, solve_problem
-
-# a user constraint may be violated by this much relative to the size of its terms: the
-# interior-point solvers stop at 1e-8 relative feasibility, so 1e-6 leaves a margin of 100
-USER_TOLERANCE = 1e-6
 
 
 def _selector(rows: np.ndarray, n: int, sign: float = 1.0) -> sp.csr_matrix:
@@ -75,8 +70,9 @@ def _per_pair(value, n_pairs: int, what: str, fix: str):
     return arr
 
 
-class DualModel:
-    """The CVXPY problem of the discrete dual, a modelling object a user may change.
+class DualModel(ConvexModel):
+    """The CVXPY problem of the discrete dual, a modelling object a user may change
+    (:class:`~cvxdual.modelling.ConvexModel`: changes, solving, misuse errors).
 
     Handles: ``t`` (scaled stress Variable, ``3 n_pieces``), ``load_factor`` (a non-negative
     Parameter, default 1, multiplying the applied loads; a Variable with ``limit_analysis``),
@@ -95,10 +91,12 @@ class DualModel:
     load_factor``; add yield constraints before solving.
     """
 
+    what = "dual QP"
+
     def __init__(self, system: System, triangulation: str = "type1", limit_analysis: bool = False):
+        self._start(limit_analysis)
         self.system = system
         self.triangulation = triangulation
-        self.limit_analysis = bool(limit_analysis)
         sc = system.scales
         L, E0, s0 = sc.length, sc.modulus, sc.stress
         n_p = system.n_pieces
@@ -111,24 +109,14 @@ class DualModel:
         self._slides = (self._jxa >= 0) & (self._jxb >= 0)  # pairs with a tangential unknown
         self._force_unit = s0 * L  # a row of H t - h times this is a nodal force
         self.t = cp.Variable(3 * n_p, name="t")
-        if self.limit_analysis:
-            self.load_factor = cp.Variable(nonneg=True, name="load_factor")
-        else:
-            self.load_factor = cp.Parameter(nonneg=True, value=1.0, name="load_factor")
         A = (system.Ah * (E0 / L**2)).tocsr()
         c = (system.E.T @ system.q0) * (E0 / (s0 * L**2))
         self._energy = 0.5 * cp.quad_form(self.t, A, assume_PSD=True) - c @ self.t  # scaled S(t)
         self._energy_unit = s0**2 * L**2 / E0
         self._default = cp.Maximize(self.load_factor) if self.limit_analysis else cp.Minimize(self._energy)
         self._objective = self._default
-        self._user: list[tuple[str, cp.Constraint]] = []
         self._g = None  # Tresca thresholds: number array or Parameter
         self._sigma_a = None  # adhesion: number array or Parameter
-        self._version = 0  # bumped by every change of the problem
-        self._solved = None  # (version, parameter values, solver, options) of the last solve
-        self._problem = None
-        self._rhs = None  # (key, data, chain, inverse data, b0, b1): re-solves that change load_factor only
-        self.info: dict = {}
         self._build()
 
     # -- rows ---------------------------------------------------------------------------
@@ -180,84 +168,18 @@ class DualModel:
         self._constraints = cons
         self._problem = None
 
-    def _changed(self) -> None:
-        self._version += 1
-        self._problem = None
-
-    # -- the problem, read-only ---------------------------------------------------------
+    # -- changes ------------------------------------------------------------------------
     @property
     def constraints(self) -> dict:
-        """The package's named constraints (a copy): ``equilibrium``, ``contact`` and, with
-        friction, ``friction_upper`` / ``friction_lower`` (``+-R''_x(B_k) <= g_k w_k``)."""
+        """The package's named rows (a copy): ``equilibrium``, ``contact`` and, with friction,
+        ``friction_upper`` / ``friction_lower`` (``+-R''_x(B_k) <= g_k w_k``)."""
         return dict(self._constraints)
 
-    @property
-    def user_constraints(self) -> dict:
-        """The constraints added by :meth:`add_constraint`, by name."""
-        return dict(self._user)
+    def _own_changes(self) -> list[str]:
+        return (["Tresca friction"] if self._g is not None else []) + (["adhesion"] if self._sigma_a is not None
+                                                                        else [])
 
-    @property
-    def objective(self):
-        return self._objective
-
-    @property
-    def problem(self) -> cp.Problem:
-        """The current :class:`cvxpy.Problem` (rebuilt after every change; do not replace it)."""
-        if self._problem is None:
-            self._problem = cp.Problem(self._objective, [*self._constraints.values(), *(c for _, c in self._user)])
-        return self._problem
-
-    @problem.setter
-    def problem(self, value):
-        raise ModelError("model.problem cannot be replaced (a later change would silently rebuild the old one); "
-                         "use model.set_objective(...) and model.add_constraint(...)")
-
-    def changes(self) -> list[str]:
-        """The changes made to the package's problem, as short phrases (for messages)."""
-        out = ["limit analysis (maximise load_factor)"] if self.limit_analysis else []
-        if self._objective is not self._default:
-            out.append("set_objective")
-        out += [f"add_constraint {name!r}" for name, _ in self._user]
-        if self._g is not None:
-            out.append("Tresca friction")
-        if self._sigma_a is not None:
-            out.append("adhesion")
-        return out
-
-    # -- changes ------------------------------------------------------------------------
-    def add_constraint(self, *constraints, name: str | None = None) -> DualModel:
-        """Add convex constraints (e.g. on :attr:`stress`, :meth:`von_mises`). ``name`` (default
-        ``constraint N``) appears in :attr:`user_constraints`, ``solution.checks`` and errors."""
-        if not constraints:
-            raise ModelError("add_constraint needs at least one constraint, e.g. model.von_mises() <= 500")
-        for c in constraints:
-            if not isinstance(c, cp.constraints.Constraint):
-                raise ModelError(f"add_constraint takes cvxpy constraints (such as model.shear_stress() <= k), got "
-                                 f"{type(c).__name__}: build it from the model's expressions, not from numbers")
-            if not c.is_dcp():
-                raise ModelError(f"constraint {c!s:.80} is not convex (not DCP); only convex constraints keep "
-                                 "the problem solvable")
-        for i, c in enumerate(constraints):
-            label = (name if len(constraints) == 1 else f"{name}[{i}]") if name else f"constraint {len(self._user) + 1}"
-            if label in dict(self._user):
-                raise ModelError(f"a constraint named {label!r} exists already; choose another name")
-            self._user.append((label, c))
-        self._changed()
-        return self
-
-    def set_objective(self, objective) -> DualModel:
-        """Replace the objective (a ``cp.Minimize`` or ``cp.Maximize``), kept until set again.
-        :attr:`complementary_energy` is the default one in physical units."""
-        if not isinstance(objective, (cp.Minimize, cp.Maximize)):
-            raise ModelError("set_objective takes cp.Minimize(...) or cp.Maximize(...), "
-                             f"got {type(objective).__name__}")
-        if not objective.is_dcp():
-            raise ModelError("the objective is not convex (not DCP): minimise a convex or maximise a concave "
-                             "expression")
-        self._objective = objective
-        self._changed()
-        return self
-
+    # -- changes of the rows --------------------------------------------------------------
     def add_friction(self, g) -> DualModel:
         """Tresca friction: ``|R''_x(B_k)| <= g_k w_k`` at every pair whose ``x`` dofs are free,
         the tangential action = reaction kept. ``g`` (a traction, the scene's stress unit) is a
@@ -339,110 +261,6 @@ class DualModel:
         d = cp.vstack([s[:, 0] - s[:, 1], s[:, 1] - s33, s33 - s[:, 0], np.sqrt(6.0) * s[:, 2]])
         return cp.norm(d, 2, axis=0) / np.sqrt(2.0)
 
-    # -- solving ------------------------------------------------------------------------
-    def _state(self) -> tuple:
-        values = tuple(np.asarray(p.value).tobytes() if p.value is not None else None
-                       for p in self.problem.parameters())
-        return self._version, values
-
-    def solve(self, solver: str = DEFAULT_SOLVER, time_limit: float | None = None, verbose: bool = False,
-              **options) -> dict:
-        """Solve; returns the solver's statistics. ``time_limit`` in seconds (Clarabel, SCS,
-        OSQP), ``verbose`` prints the solver's log, ``options`` go to the solver.
-        Raises :class:`~cvxdual.errors.SolverError` naming the model's changes when they make
-        the problem infeasible or unbounded."""
-        solver = resolve_solver(solver)
-        if solver == "FAST":
-            raise ModelError("the fast path solves the package's own problem, not a model; use solver='CLARABEL'")
-        for p in self.problem.parameters():
-            if p.value is None:
-                raise ModelError(f"parameter {p.name()!r} has no value; set {p.name()}.value before solving")
-        key = (*self._state(), solver, repr(sorted(options.items())))
-        if self._solved == key:
-            raise ModelError("the model was solved already with these data; read model.solution(), or change "
-                             "load_factor, a parameter or the model before solving again")
-        self._solved = None
-        changes = self.changes()
-        advice = None
-        if changes:
-            what = ", ".join(changes)
-            advice = {"infeasible": f"no stress field satisfies the model with your changes ({what}); the "
-                                    "scene's own constraints are satisfiable, so relax those changes",
-                      "infeasible_inaccurate": f"the solver suspects your changes ({what}) leave no admissible "
-                                               "stress field; relax them, or try another solver",
-                      "unbounded": f"the objective is unbounded over the admissible stresses with your changes "
-                                   f"({what}); bound it with constraints",
-                      "unbounded_inaccurate": f"the objective looks unbounded with your changes ({what}); "
-                                              "bound it with constraints"}
-        self.info = solve_problem(self.problem, solver, "dual QP", advice, time_limit, verbose,
-                                  run=self._runner(solver, verbose), **options)
-        self._solved = key
-        return self.info
-
-    def _runner(self, solver: str, verbose: bool):
-        """``run(opts)`` for :func:`solve_problem`: CVXPY's solve, except when only ``load_factor``
-        changed since the last solve of this problem. The solver's data then differ in ``b`` only,
-        ``b = b0 + load_factor b1`` (DPP: affine in the parameter), and the solver is called on the
-        cached data with that ``b``: CVXPY's recompile (the parameter applied to the whole canonical
-        tensor, ``O(nnz)``) is skipped. ``b0``, ``b1`` come from two of CVXPY's cached compiles (at
-        0 and 1) at the second such solve, which also checks that nothing but ``b`` changes."""
-        problem = self.problem
-        lf = self.load_factor
-
-        def run(opts: dict) -> float:
-            others = tuple(np.asarray(p.value).tobytes() for p in problem.parameters() if p is not lf)
-            key = (self._version, others, solver, repr(sorted(opts.items())))
-            state = self._rhs if self._rhs is not None and self._rhs[0] == key else None
-            if self.limit_analysis or state is None or state[1] is False:
-                problem.solve(solver=solver, verbose=bool(verbose), **opts)
-                if state is None:
-                    self._rhs = (key, None)  # the next solve with this key builds the affine b
-                return problem.compilation_time
-            t0 = time.perf_counter()
-            if state[1] is None:
-                parts = self._affine_rhs(problem, solver, opts)
-                if parts is None:  # load_factor is not in b alone: CVXPY from now on
-                    self._rhs = (key, False)
-                    problem.solve(solver=solver, verbose=bool(verbose), **opts)
-                    return problem.compilation_time
-                self._rhs = state = (key, *parts)
-            _, data, chain, inverse, b0, b1 = state
-            data = {**data, "b": b0 + float(lf.value) * b1}
-            compile_time = time.perf_counter() - t0
-            problem.unpack_results(chain.solve_via_data(problem, data, False, bool(verbose), opts), chain, inverse)
-            return compile_time
-
-        return run
-
-    def _affine_rhs(self, problem, solver: str, opts: dict):
-        """``(data at load_factor 0, chain, inverse data, b0, b1)`` with ``b1 = b(1) - b(0)``, or
-        ``None`` unless the solver takes conic data and ``b`` alone depends on ``load_factor`` (a
-        user's constraint may multiply a variable by it)."""
-        from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
-        lf = self.load_factor
-        value = lf.value
-        try:
-            lf.value = 0.0
-            data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
-            lf.value = 1.0
-            one = problem.get_problem_data(solver, solver_opts=opts)[0]
-        finally:
-            lf.value = value
-        if not isinstance(chain.solver, ConicSolver):
-            return None
-        for k, v in data.items():
-            w = one[k]
-            changed = (v != w).nnz if sp.issparse(v) else isinstance(v, np.ndarray) and not np.array_equal(v, w)
-            if k != "b" and changed:
-                return None
-        return data, chain, inverse, data["b"], one["b"] - data["b"]
-
-    def _require_solved(self) -> None:
-        if self._solved is None:
-            raise ModelError("the model has not been solved (or its last solve failed); call model.solve() first")
-        if self._solved[:2] != self._state():
-            raise ModelError("the model or a parameter changed since the last solve; call model.solve() again")
-
     # -- results in physical units ------------------------------------------------------
     def stresses(self) -> np.ndarray:
         """``(n_pieces, 3)`` Voigt stresses of the last solve."""
@@ -464,14 +282,6 @@ class DualModel:
         the objective is the default and no constraint was added."""
         s = self.system
         return s.Z @ (s.r0 - s.scales.displacement * (s.T @ self.multipliers()))
-
-    def value(self, expression) -> np.ndarray:
-        """The value of an expression of this model at the last solve."""
-        self._require_solved()
-        if not set(expression.variables()) <= set(self.problem.variables()):
-            raise ModelError("the expression uses variables that are not in this model's problem; build it from "
-                             "this model's handles (model.stress, model.contact_force, ...)")
-        return np.asarray(expression.value, dtype=float)
 
     def solution(self, check: bool = True) -> Solution:
         """The :class:`~cvxdual.Solution` of the last solve, with the checks that still hold for
@@ -509,11 +319,6 @@ class DualModel:
             return None
         n = len(self._slides)
         return np.broadcast_to(np.asarray(value.value if isinstance(value, cp.Parameter) else value, float), (n,))
-
-    def _elastic(self) -> bool:
-        """Whether the multipliers are the displacements of an elastic problem: the default
-        objective and no added constraint (friction, adhesion and load_factor keep it)."""
-        return self._objective is self._default and not self._user and not self.limit_analysis
 
     def _checks(self, system, t, u, fields, g, sigma_a, lf) -> tuple[dict, dict]:
         """The residuals that hold for this model (see :meth:`solution`) and the skipped ones."""
@@ -564,9 +369,3 @@ class DualModel:
         if sigma_a is not None:
             out += float(np.sum(sigma_a * w * (system.eps - (q[lo, 1] - q[up, 1]))))
         return out
-
-    @staticmethod
-    def _violation(c) -> float:
-        """Largest violation of a user constraint relative to the size of its terms."""
-        size = max((float(np.abs(a.value).max(initial=0.0)) for a in c.args if a.value is not None), default=0.0)
-        return float(np.max(c.violation(), initial=0.0)) / max(size, 1e-300)
