@@ -100,6 +100,14 @@ class System:
                 + sp.csr_matrix((np.ones(len(self.jb)), (self.jb, self.ja)), shape=(n, n)))
 
     @cached_property
+    def pair_x_dofs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(jxa, jxb, slides)``: r indices of the ``x`` dofs of each pair's upper and lower
+        node (-1 if fixed) and whether both are free (the pair has a tangential unknown)."""
+        up, lo = self.mesh.pairs.T
+        jxa, jxb = self.rdof[2 * up], self.rdof[2 * lo]
+        return jxa, jxb, (jxa >= 0) & (jxb >= 0)
+
+    @cached_property
     def index_sets(self) -> tuple[np.ndarray, np.ndarray]:
         """``J0`` (equality rows, minus anchors) and ``J-`` (sign rows) in y coordinates."""
         minus = np.zeros(self.n_r, bool)

@@ -22,6 +22,7 @@ are the displacements (slips included), recovered as ``u_h = Z (r0 - delta T y)`
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import cvxpy as cp
@@ -50,7 +51,7 @@ def _selector(rows: np.ndarray, n: int, sign: float = 1.0) -> sp.csr_matrix:
     return sp.csr_matrix((np.full(k, sign), (np.arange(k), rows)), shape=(k, n))
 
 
-def _per_pair(value, n_pairs: int, what: str, fix: str):
+def _per_pair(value, n_pairs: int, what: str, fix: str, allow_inf: bool):
     """A non-negative number, an ``(n_pairs,)`` array or a non-negative cvxpy Parameter."""
     if isinstance(value, cp.Parameter):
         if value.shape not in ((), (n_pairs,)) or not value.is_nonneg():
@@ -59,14 +60,17 @@ def _per_pair(value, n_pairs: int, what: str, fix: str):
         return value
     if isinstance(value, (cp.Expression, cp.constraints.Constraint)):
         raise ModelError(f"{what} must be a number, an array or a cvxpy Parameter, not an expression; {fix}")
+    if isinstance(value, (str, bytes)):
+        raise ModelError(f"{what} must be a number, not the text {value!r}; {fix}")
     try:
         arr = np.broadcast_to(np.asarray(value, dtype=float), (n_pairs,)).copy()
     except (TypeError, ValueError):
         got = np.shape(value) if hasattr(value, "__len__") else type(value).__name__
         raise ModelError(f"{what} must be a number or one value per contact pair ({n_pairs}), got {got}; "
                          f"{fix}") from None
-    if isinstance(value, bool) or np.isnan(arr).any() or (arr < 0).any():
-        raise ModelError(f"{what} must be non-negative numbers (inf allowed), got {value!r}; {fix}")
+    if isinstance(value, bool) or np.isnan(arr).any() or (arr < 0).any() or (not allow_inf and np.isinf(arr).any()):
+        raise ModelError(f"{what} must be non-negative {'numbers (inf allowed)' if allow_inf else 'finite numbers'}, "
+                         f"got {value!r}; {fix}")
     return arr
 
 
@@ -104,9 +108,7 @@ class DualModel(ConvexModel):
         self._H = (system.T.T @ (ZT @ system.E)).tocsr() / L  # rows: T^T R / (s0 L) per unit t
         self._h = (system.T.T @ (ZT @ system.f)) / (s0 * L)
         self.J0, self.Jm = system.index_sets
-        up, lo = system.mesh.pairs.T
-        self._jxa, self._jxb = system.rdof[2 * up], system.rdof[2 * lo]
-        self._slides = (self._jxa >= 0) & (self._jxb >= 0)  # pairs with a tangential unknown
+        self._jxa, self._jxb, self._slides = system.pair_x_dofs
         self._force_unit = s0 * L  # a row of H t - h times this is a nodal force
         self.t = cp.Variable(3 * n_p, name="t")
         A = (system.Ah * (E0 / L**2)).tocsr()
@@ -176,8 +178,9 @@ class DualModel(ConvexModel):
         return dict(self._constraints)
 
     def _own_changes(self) -> list[str]:
-        return (["Tresca friction"] if self._g is not None else []) + (["adhesion"] if self._sigma_a is not None
-                                                                        else [])
+        # friction with g = 0 everywhere leaves the rows as they are: no change
+        fric = self._g is not None and (isinstance(self._g, cp.Parameter) or bool(np.any(self._g > 0)))
+        return (["Tresca friction"] if fric else []) + (["adhesion"] if self._sigma_a is not None else [])
 
     # -- changes of the rows --------------------------------------------------------------
     def add_friction(self, g) -> DualModel:
@@ -189,7 +192,7 @@ class DualModel(ConvexModel):
         if self._g is not None:
             raise ModelError("friction is set already; build a new model to change it, or pass g as a "
                              "cvxpy Parameter and change its value")
-        g = _per_pair(g, len(self._slides), "g", fix)
+        g = _per_pair(g, len(self._slides), "g", fix, allow_inf=True)
         if not self._slides.any():
             raise ModelError("no contact pair has free x dofs (all are supported in x), so friction has "
                              "nothing to act on")
@@ -208,7 +211,8 @@ class DualModel(ConvexModel):
         whole candidate interval (a cohesive law of infinite range)."""
         if self._sigma_a is not None:
             raise ModelError("adhesion is set already; build a new model, or pass sigma_a as a cvxpy Parameter")
-        self._sigma_a = _per_pair(sigma_a, len(self.Jm), "sigma_a", "e.g. model.allow_adhesion(0.01 * p0)")
+        self._sigma_a = _per_pair(sigma_a, len(self.Jm), "sigma_a", "e.g. model.allow_adhesion(0.01 * p0)",
+                                  allow_inf=False)
         self._build()
         self._changed()
         return self
@@ -268,8 +272,8 @@ class DualModel(ConvexModel):
         return self.system.scales.stress * np.asarray(self.t.value).reshape(-1, 3)
 
     def multipliers(self) -> np.ndarray:
-        """``y`` in ``r`` coordinates of the generators: every block's multipliers mapped back
-        (the slips ``y_kx2`` from the two friction blocks)."""
+        """``y*``: every block's multipliers mapped back to the generators (``y`` coordinates,
+        ``r = r0 - delta T y``); under friction ``y[jxb] - y[jxa]`` is minus the slip over ``delta``."""
         self._require_solved()
         y = np.zeros(self.system.n_r)
         for name, (M, _, _) in self._blocks.items():
@@ -288,6 +292,7 @@ class DualModel(ConvexModel):
         the changed problem applied and the others listed, with the reason, in
         ``solution.checks["skipped"]``. A failed check raises :class:`AccuracyError`."""
         self._require_solved()
+        t0 = time.perf_counter()
         s = self.system
         lf = float(self.load_factor.value)
         system = s if lf == 1.0 else replace(s, f=lf * s.f)
@@ -302,16 +307,27 @@ class DualModel(ConvexModel):
             fields["error"] = None
         fields["residuals"] = applied
         fields["duality_gap"] = applied.get("duality_gap", float("nan"))
+        # the model's own phases; meshing and assembly happened before it was built
+        build = float(self.info.get("compile_time") or 0.0)
+        solve = float(self.info.get("wall") or 0.0) - build
+        recover = time.perf_counter() - t0
+        timings = {"mesh": 0.0, "assemble": 0.0, "build": build, "solve": solve, "recover": recover,
+                   "error": 0.0, "total": build + solve + recover}
         sol = Solution(triangulation=self.triangulation, stress_space="p0", level=int(s.mesh.level),
-                       timings={}, checks={"applied": dict(applied), "skipped": skipped}, **fields)
+                       timings=timings, checks={"applied": dict(applied), "skipped": skipped}, **fields)
         if check:
             tol = {**TOLERANCES, "user_constraints": USER_TOLERANCE}
-            bad = {k: v for k, v in applied.items() if v > tol[k]}
+            bad = {k: v for k, v in applied.items() if not v <= tol[k]}  # NaN fails too
             if bad:
                 txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
+                advice = ("try model.solve('CLARABEL') or tighter solver tolerances" if lf >= 0.1 else
+                          f"at load_factor {lf:g} the model's scales (set by the unit load) are {1 / lf:.0g} times "
+                          "the solution's: pass tighter tolerances (tol_gap_rel=1e-14, tol_feas=1e-16, "
+                          "tol_ktratio=1e-12 worked at 1e-4 on hertz) or build the model from the scene with its "
+                          "loads scaled")
                 raise AccuracyError(f"solver {self.info.get('solver')} returned 'optimal' but the solution fails "
-                                    f"the checks that apply to this model ({txt}); try model.solve('CLARABEL') "
-                                    "or tighter solver tolerances, or model.solution(check=False) to inspect it")
+                                    f"the checks that apply to this model ({txt}); {advice}, or "
+                                    "model.solution(check=False) to inspect it")
         return sol
 
     def _numeric(self, value):

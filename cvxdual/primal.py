@@ -38,9 +38,8 @@ class PrimalModel:
             if mask.dtype != bool or mask.shape != (n_pairs,):
                 raise ModelError(f"stick must be {n_pairs} booleans (one per contact pair), got "
                                  f"{mask.dtype} of shape {mask.shape}")
-            up, lo = system.mesh.pairs.T
-            jxa, jxb = system.rdof[2 * up], system.rdof[2 * lo]
-            k = mask & (jxa >= 0) & (jxb >= 0)
+            jxa, jxb, slides = system.pair_x_dofs
+            k = mask & slides
             if k.any():
                 cons["stick"] = self.r[jxb[k]] - self.r[jxa[k]] == 0
         if len(system.anchors):

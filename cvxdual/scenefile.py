@@ -195,7 +195,7 @@ def scene_from_dict(data: dict) -> Scene:
 
 def _friction(d) -> Friction:
     """``[contact] friction = { kind = "tresca", g = ... }``; ``kind`` defaults to tresca, so
-    ``--set contact.friction.g=100`` gives a frictionless scene friction."""
+    ``--set contact.friction.g=100`` alone gives a frictionless scene Tresca friction."""
     _check_keys(d, FRICTION_KEYS, "contact.friction")
     kind = d.get("kind", "tresca")
     if "g" not in d and kind == "tresca":  # another kind: Friction's error on the kind says more

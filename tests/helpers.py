@@ -41,3 +41,17 @@ def contains(pieces, pts):
         ins = (x >= s.xl[idx]) & (x <= s.xr[idx]) & (pts[:, 1:] >= lo) & (pts[:, 1:] <= hi)
         np.logical_or.at(hit.T, s.piece, ins.T)  # a piece with two slabs: either counts
     return hit
+
+
+def load_example(name: str):
+    """The module ``examples/<name>.py`` (the examples live outside the package)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -5,29 +5,20 @@ the example's own run is at level 3. No test times anything: the compile-once pr
 checked on CVXPY's cache, not on a clock.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_example
 
 import cvxdual
 from cvxdual.hertz import hertz_line_contact
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "load_sweep.py"
 LEVEL = 2
 
 
-def load_example():
-    spec = importlib.util.spec_from_file_location("load_sweep", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
-ex = load_example()
+ex = load_example("load_sweep")
 
 
 @pytest.fixture(scope="module")

@@ -3,27 +3,14 @@
 Levels 0 and 1 only (well under a second each); the example's own run goes to level 2.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_example
 
 from cvxdual.bounds import ADMISSIBLE_TOL, residuals
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "prandtl_punch.py"
-
-
-def load_example():
-    spec = importlib.util.spec_from_file_location("prandtl_punch", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-ex = load_example()
+ex = load_example("prandtl_punch")
 
 
 @pytest.fixture(scope="module")

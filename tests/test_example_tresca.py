@@ -3,29 +3,20 @@
 Levels 1 and 2 only (a fraction of a second each); the example's own run goes to level 3.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_example
 
 from cvxdual.cli import main as cli_main
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "tresca_friction.py"
 LEVELS = (1, 2)
 DISSIMILAR = ("cylinder-on-block", "hertz")
 
 
-def load_example():
-    spec = importlib.util.spec_from_file_location("tresca_friction", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
-ex = load_example()
+ex = load_example("tresca_friction")
 
 
 @pytest.fixture(scope="module")

@@ -5,32 +5,19 @@ Coarse levels only (P0 level 1: 576 pieces, eq level 0; well under a second each
 own runs go to P0 level 3 and eq level 1.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import load_example
 
 import cvxdual
 from cvxdual.bounds import ADMISSIBLE_TOL
-from cvxdual.dual import USER_TOLERANCE
 from cvxdual.hertz import mcewen_stress
 from cvxdual.invariants import von_mises
 from cvxdual.materials import Material
+from cvxdual.modelling import USER_TOLERANCE
 from cvxdual.scenefile import builtin_data
 from cvxdual.solution import TOLERANCES
-
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def load_example(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
 
 cap_ex = load_example("von_mises_cap")
 mp_ex = load_example("min_peak_von_mises")

@@ -221,3 +221,60 @@ def test_load_sweep_reuses_the_solver_data_only_when_it_may():
             assert rel(swept.stresses(), fresh.stresses()) < tol
             assert rel(swept.displacements(), fresh.displacements()) < tol
             assert swept.info["status"] == "optimal"
+
+
+def test_small_load_factors_are_solved_or_refused_with_advice():
+    """The scales are the unit load's: Clarabel's tolerances follow the load factor down, so the
+    checks hold at 1e-2; far below, the solution is refused with advice, never returned."""
+    model = cd.build_model("hertz", level=1)
+    model.load_factor.value = 0.01
+    model.solve()
+    assert model.solution().checks["applied"]["duality_gap"] < 1e-6  # measured 1.5e-7
+    model.load_factor.value = 1e-4
+    model.solve()
+    with pytest.raises(cd.AccuracyError, match="load_factor 0.0001.*tighter tolerances"):
+        model.solution()
+    model.solve(tol_gap_abs=1e-20, tol_gap_rel=1e-14, tol_feas=1e-16, tol_ktratio=1e-12)  # as the advice says
+    assert model.solution().checks["applied"]["duality_gap"] < 1e-6
+
+
+def test_equalities_and_stick_under_a_change(model):
+    """A side forced to 0 is judged against the stresses' size, not its own rounding; the
+    stick state is still read (from the friction reserve) when the multipliers are not displacements."""
+    model.add_friction(358.5)
+    model.solve()
+    plain = model.solution()
+    capped = cd.build_model("hertz", level=1)
+    capped.add_friction(358.5)
+    capped.add_constraint(capped.stress[:, 2] * 0.0 + capped.tangential_force[0] == 0.0, name="no shear at 0")
+    capped.add_constraint(capped.von_mises() <= 1e6, name="inactive cap")
+    capped.solve()
+    sol = capped.solution()
+    assert sol.checks["applied"]["user_constraints"] < 1e-6
+    assert "displacement" in sol.checks["skipped"]
+    assert np.array_equal(sol.contact["stick"], plain.contact["stick"]) and plain.contact["stick"].any()
+
+
+def test_non_finite_and_non_numeric_inputs_are_refused(model):
+    with pytest.raises(cd.ModelError, match="finite"):
+        model.allow_adhesion(np.inf)
+    with pytest.raises(cd.ModelError, match="text"):
+        model.add_friction("1")
+    model.solve()
+    with pytest.raises(cd.ModelError, match="cvxpy expression"):
+        model.value(model.von_mises)
+    g = cp.Parameter(nonneg=True, value=np.inf)
+    model.add_friction(g)
+    with pytest.raises(cd.ModelError, match="non-finite"):
+        model.solve()
+
+
+def test_model_solution_is_complete_and_g_zero_changes_nothing(model, capsys):
+    model.add_friction(0.0)  # no friction rows: the scene's own problem
+    model.solve()
+    model.solve(verbose=True)  # only the log asked for: allowed
+    sol = model.solution()
+    assert model.changes() == [] and sol.error is not None  # the exact field still applies
+    assert set(sol.timings) == {"mesh", "assemble", "build", "solve", "recover", "error", "total"}
+    from cvxdual.cli import human_summary
+    assert "contact:" in human_summary(sol)
