@@ -151,6 +151,13 @@ class DualModel(ConvexModel):
         eq_rows = np.setdiff1d(self.J0, drop)
         # row R'_x(A_k) of each such pair also takes R''_x(B_k): tangential action = reaction
         at = np.searchsorted(eq_rows, self._jxa[tangential])
+        if len(at) and (np.any(at >= len(eq_rows)) or np.any(eq_rows[np.minimum(at, len(eq_rows) - 1)]
+                                                               != self._jxa[tangential])
+                        or len(np.unique(drop)) < len(drop) or np.isin(drop, self._jxa[tangential]).any()):
+            # an anchor (a floating motion's dropped row) or a tied node on a pair's x dof: the
+            # combined rows would be wrong, so refuse rather than guess
+            raise ModelError("friction needs each contact pair's x dofs to be its own free dofs, not anchors of a "
+                             "floating motion or tied nodes; support the bodies in x or solve without friction")
         P = _selector(eq_rows, n_r) + sp.csr_matrix((np.ones(len(at)), (at, drop)), shape=(len(eq_rows), n_r))
         jb = self.Jm
         blocks = {"equilibrium": (P, "==", 0.0), "contact": (_selector(jb, n_r), "<=",
@@ -170,7 +177,7 @@ class DualModel(ConvexModel):
         self._constraints = cons
         self._problem = None
 
-    # -- changes ------------------------------------------------------------------------
+    # -- the rows, read-only ------------------------------------------------------------
     @property
     def constraints(self) -> dict:
         """The package's named rows (a copy): ``equilibrium``, ``contact`` and, with friction,
@@ -201,7 +208,12 @@ class DualModel(ConvexModel):
             raise ModelError("a body can slide freely along the contact (a floating x translation), which friction "
                              "alone cannot hold; add an x support to that body")
         self._g = g
-        self._build()
+        try:
+            self._build()
+        except ModelError:  # refused: the model stays frictionless
+            self._g = None
+            self._build()
+            raise
         self._changed()
         return self
 

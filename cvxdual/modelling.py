@@ -110,11 +110,13 @@ class ConvexModel:
             if not c.is_dcp():
                 raise ModelError(f"constraint {c!s:.80} is not convex (not DCP); only convex constraints keep "
                                  "the problem solvable")
-        for i, c in enumerate(constraints):
-            label = (name if len(constraints) == 1 else f"{name}[{i}]") if name else f"constraint {len(self._user) + 1}"
-            if label in dict(self._user):
-                raise ModelError(f"a constraint named {label!r} exists already; choose another name")
-            self._user.append((label, c))
+        n = len(self._user)
+        labels = [(name if len(constraints) == 1 else f"{name}[{i}]") if name else f"constraint {n + i + 1}"
+                  for i in range(len(constraints))]
+        taken = set(dict(self._user)) & set(labels)
+        if taken:  # checked before adding any: a refused call leaves the model as it was
+            raise ModelError(f"a constraint named {sorted(taken)[0]!r} exists already; choose another name")
+        self._user += list(zip(labels, constraints, strict=True))
         self._changed()
         return self
 

@@ -278,3 +278,20 @@ def test_model_solution_is_complete_and_g_zero_changes_nothing(model, capsys):
     assert set(sol.timings) == {"mesh", "assemble", "build", "solve", "recover", "error", "total"}
     from cvxdual.cli import human_summary
     assert "contact:" in human_summary(sol)
+
+
+def test_friction_refuses_a_body_that_slides_freely():
+    """Without its x support the upper block floats in x (a slip of every pair), a motion the
+    frictionless model anchors at a pair's x dof; friction would change that row, so it is
+    refused and the model stays frictionless."""
+    import tomllib
+    from pathlib import Path
+
+    data = tomllib.loads((Path(cd.__file__).parent / "data" / "patch.toml").read_text())
+    del data["bodies"]["top"]["boundary"]["symmetry"]
+    model = cd.build_model(data, level=0)
+    with pytest.raises(cd.ModelError, match="slide freely"):
+        model.add_friction(10.0)
+    assert model.changes() == [] and set(model.constraints) == {"equilibrium", "contact"}
+    model.solve()
+    assert model.solution().checks["skipped"] == {}
