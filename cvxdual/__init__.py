@@ -32,7 +32,7 @@ from .triangulation import discretize
 __version__ = "0.1.0"
 
 # the CVXPY models load CVXPY (0.3 s): on first use, so that the fast path never pays for it
-_LAZY = {"DualModel": ".dual", "PrimalModel": ".primal"}
+_LAZY = {"DualModel": ".dual", "EquilibriumModel": ".eqmodel", "PrimalModel": ".primal"}
 
 
 def __getattr__(name):
@@ -42,7 +42,8 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
-    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "ExactSpec", "Friction", "Material",
+    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "EquilibriumModel", "ExactSpec", "Friction",
+    "Material",
     "MeshError", "MeshSpec", "ModelError", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
     "SceneError", "Solution", "SolverError", "System", "TooLargeError", "Traction", "UnbalancedLoadError",
     "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize",

@@ -264,18 +264,8 @@ class DualModel(ConvexModel):
         """``S(t) = 1/2 t.A_h t - t.E^T q0`` (energy per unit thickness)."""
         return self._energy_unit * self._energy
 
-    def shear_stress(self):
-        """``(n_pieces,)`` in-plane maximum shear ``sqrt(((s11 - s22)/2)^2 + s12^2)`` (convex)."""
-        s = self.stress
-        return cp.norm(cp.vstack([0.5 * (s[:, 0] - s[:, 1]), s[:, 2]]), 2, axis=0)
-
-    def von_mises(self):
-        """``(n_pieces,)`` von Mises stress (convex), with ``s33 = nu (s11 + s22)`` in plane
-        strain and 0 in plane stress."""
-        s = self.stress
-        s33 = cp.multiply(out_of_plane_factor(self.system), s[:, 0] + s[:, 1])
-        d = cp.vstack([s[:, 0] - s[:, 1], s[:, 1] - s33, s33 - s[:, 0], np.sqrt(6.0) * s[:, 2]])
-        return cp.norm(d, 2, axis=0) / np.sqrt(2.0)
+    def _out_of_plane(self) -> np.ndarray:
+        return out_of_plane_factor(self.system.mesh.scene, self.system.pieces.body)
 
     # -- results in physical units ------------------------------------------------------
     def stresses(self) -> np.ndarray:

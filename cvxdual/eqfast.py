@@ -1,6 +1,6 @@
 """The fast path of the equilibrium (Johnson-Mercier) dual (docs/equilibrium.md, section 10):
 a primal-dual active set method on the KKT system of the QP of
-:class:`~cvxdual.equilibrium.EquilibriumModel`, condensed by hybridisation to an SPD system.
+:class:`~cvxdual.eqmodel.EquilibriumModel`, condensed by hybridisation to an SPD system.
 
 Hybridisation. Every parameter ``y`` that two triangles share (an interior edge dof, or a
 contact normal traction in contact, shared by the two faces) gets a copy in each triangle,
@@ -110,7 +110,7 @@ def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray
 
 class HybridSolver:
     """Primal-dual active set solver of the equilibrium dual of one :class:`EquilibriumSpace`,
-    in the nondimensional variables of :class:`~cvxdual.equilibrium.EquilibriumModel`."""
+    in the nondimensional variables of :class:`~cvxdual.eqmodel.EquilibriumModel`."""
 
     def __init__(self, space: EquilibriumSpace):
         t0 = time.perf_counter()

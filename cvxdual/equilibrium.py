@@ -32,7 +32,7 @@ import scipy.sparse as sp
 
 from .assembly import Scales
 from .boundary import supported
-from .errors import CvxdualError, MeshError, SceneError, SolverError
+from .errors import MeshError, SceneError, SolverError
 from .jm import (
     MASS0,
     bary_gradients,
@@ -487,58 +487,3 @@ def make_exact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, dict
     y2, iters = project_equilibrium(space, y1)
     change = float(np.abs(y2 - y).max() / space.scales.stress)
     return y2, {"contact_change": rel, "projection_iterations": iters, "max_change": change}
-
-
-# -- the CVXPY model -----------------------------------------------------------------------
-
-class EquilibriumModel:
-    """The dual problem on the equilibrium space: minimise ``1/2 int sigma:A sigma +
-    int_a^b p eps dx`` (``p = -sigma_nn``), i.e. ``S(sigma) + L(u0)``, over ``sigma`` in ``S_EP``.
-
-    Nondimensional: the Variable ``y`` is the parameter vector divided by the stress scale and
-    the objective is divided by ``s^2 L^2 / E``. Handles: ``constraints["equilibrium"]``
-    (``div sigma + F = 0``) and ``constraints["contact"]`` (``sigma_nn <= 0``), ``problem``.
-    """
-
-    def __init__(self, space: EquilibriumSpace):
-        import cvxpy as cp
-        self.space = space
-        sc = space.scales
-        S, sigma0 = space.stress_map, space.sigma0
-        Q = space.energy_matrix()
-        e_ref = sc.energy
-        H = (S.T @ (Q @ S)).tocsr() * (sc.stress**2 / e_ref)
-        lin = (S.T @ (Q @ sigma0)) * (sc.stress / e_ref)
-        ci = space.contact_y.ravel()
-        lin[ci] -= space.gap_weights().ravel() * (sc.stress / e_ref)
-        B = (space.div @ S).tocsr()
-        rhs = (space.div_rhs - space.div @ sigma0) / sc.stress
-        self.y = cp.Variable(space.n_y, name="y")
-        self.constraints = {"equilibrium": B @ self.y == rhs, "contact": self.y[ci] <= 0}
-        self.objective = cp.Minimize(0.5 * cp.quad_form(self.y, H, assume_PSD=True) + lin @ self.y)
-        self.problem = cp.Problem(self.objective, list(self.constraints.values()))
-        self.constant = 0.5 * float(sigma0 @ (Q @ sigma0))  # objective offset (physical)
-        self.y_exact: np.ndarray | None = None
-        self.info: dict = {}
-
-    def solve(self, solver: str = "CLARABEL", **options) -> dict:
-        """Solve (statuses mapped to :class:`SolverError` by :func:`cvxdual.solvers.solve_problem`),
-        then apply :func:`make_exact`; returns an info dict (status, times, sizes)."""
-        import time
-
-        from .solvers import solve_problem
-        stats = solve_problem(self.problem, solver, "equilibrium dual", **options)
-        t1 = time.perf_counter()
-        self.y_exact, post = make_exact(self.space, self.y.value * self.space.scales.stress)
-        t2 = time.perf_counter()
-        self.info = {"solver": solver, "status": stats["status"], "iterations": stats["iterations"],
-                     "solve_time": stats["wall"], "solver_time": stats["solve_time"], "post_time": t2 - t1,
-                     "n_variables": self.space.n_y, "n_equalities": self.constraints["equilibrium"].size,
-                     "n_inequalities": self.constraints["contact"].size, **post}
-        return self.info
-
-    def stresses(self) -> np.ndarray:
-        """``(n_sub, 3, 3)`` exact-admissible vertex stresses (after :meth:`solve`)."""
-        if self.y_exact is None:
-            raise CvxdualError("the equilibrium model has no solution yet: call solve() first")
-        return self.space.stresses(self.y_exact)

@@ -12,20 +12,21 @@ import numpy as np
 from .errors import ModelError
 
 
-def out_of_plane_factor(system) -> np.ndarray:
-    """``(n_pieces,)`` factor ``c`` with ``s33 = c (s11 + s22)``: ``nu`` of the piece's body in
-    plane strain, 0 in plane stress. A body given by its Hooke matrix alone has no ``nu``."""
+def out_of_plane_factor(scene, body: np.ndarray) -> np.ndarray:
+    """Factor ``c`` with ``s33 = c (s11 + s22)`` at stress points of the bodies ``body`` (indices
+    into ``scene.bodies``): ``nu`` of the body in plane strain, 0 in plane stress. A body given
+    by its Hooke matrix alone has no ``nu``."""
     c = []
-    for body in system.mesh.scene.bodies:
-        m = body.material
+    for b in scene.bodies:
+        m = b.material
         if m.plane == "stress":
             c.append(0.0)
         elif m.nu is None:
-            raise ModelError(f"body {body.name!r} has a Hooke matrix but no Poisson ratio, so s33 (and von Mises) "
+            raise ModelError(f"body {b.name!r} has a Hooke matrix but no Poisson ratio, so s33 (and von Mises) "
                              "is not defined in plane strain; give the material as E and nu")
         else:
             c.append(float(m.nu))
-    return np.asarray(c)[system.pieces.body]
+    return np.asarray(c)[np.asarray(body)]
 
 
 def shear_stress(stress: np.ndarray) -> np.ndarray:

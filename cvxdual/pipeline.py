@@ -52,12 +52,23 @@ def build_system(scene, triangulation: str = "type1", level: int | None = None) 
     return assemble(*discretize(scene, check_triangulation(triangulation), level))
 
 
-def build_model(scene, triangulation: str = "type1", level: int | None = None, limit_analysis: bool = False):
+def build_model(scene, triangulation: str = "type1", level: int | None = None, limit_analysis: bool = False,
+                stress_space: str = "p0"):
     """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it: a
-    :class:`~cvxdual.dual.DualModel` (with the scene's friction, if it has any)."""
-    from .dual import DualModel
+    :class:`~cvxdual.dual.DualModel` (with the scene's friction, if it has any), or with
+    ``stress_space="eq"`` an :class:`~cvxdual.eqmodel.EquilibriumModel` (flat faces, frictionless)."""
     scene = as_scene(scene)
     triangulation = check_triangulation(triangulation)
+    if check_stress_space(stress_space) == "eq":
+        from .eqmodel import EquilibriumModel
+        from .equilibrium import EquilibriumSpace, check_flat
+        check_flat(scene)
+        if scene.friction is not None:
+            raise CvxdualError("the equilibrium stress space is frictionless; drop the scene's friction or use "
+                               "stress_space='p0'")
+        system = build_system(scene, triangulation, level)
+        return EquilibriumModel(EquilibriumSpace.from_mesh(system.mesh), limit_analysis, system)
+    from .dual import DualModel
     model = DualModel(build_system(scene, triangulation, level), triangulation, limit_analysis)
     if scene.friction is not None:
         model.add_friction(scene.friction.g)
@@ -227,33 +238,11 @@ def recover(model, triangulation: str | None = None, level: int | None = None, i
 # -- the equilibrium stress space (docs/equilibrium.md) -----------------------------------
 
 def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray, blocks: dict) -> dict:
-    """Contact quantities of equilibrium stresses at the pairs, defined as for P0: the nodal
-    force ``int p phi_k dx`` of the linear contact pressure of each edge and the pressure per
-    tributary length; a pair is active where the pressure at the pair (from either adjacent
-    edge) is positive, beyond rounding of the load scale."""
+    """Contact quantities of equilibrium stresses at the pairs (:func:`cvxdual.eqmodel.edge_contact`
+    of the contact tractions read from the lower face)."""
     from .bounds import contact_tractions
-    from .solution import ACTIVE_TOL, FORCE_FLOOR, load_scale
-    p = -contact_tractions(space, sigma, blocks)  # (n_c, 2) at both ends of each contact edge
-    x = system.mesh.pair_x
-    d = np.diff(x)
-    force = np.zeros(len(x))
-    force[:-1] += d * (2 * p[:, 0] + p[:, 1]) / 6.0
-    force[1:] += d * (p[:, 0] + 2 * p[:, 1]) / 6.0
-    at_pair = np.zeros(len(x))
-    at_pair[:-1] = p[:, 0]
-    at_pair[1:] = np.maximum(at_pair[1:], p[:, 1])
-    floor = FORCE_FLOOR * load_scale(system) / max(float(x[-1] - x[0]), 1e-300)
-    active = at_pair > ACTIVE_TOL * max(float(at_pair.max(initial=0.0)), floor)
-    up, lo = system.mesh.pairs.T
-    pressure = force / system.width
-    xs = x[active]
-    n = len(x)
-    return {"x": x, "gap": system.eps, "relative_displacement": v[lo, 1] - v[up, 1], "force": force,
-            "pressure": pressure, "active": active, "edge_pressure": p, "n_active": int(active.sum()),
-            # the equilibrium space is frictionless: no tangential force, no pair sticks
-            "tangential_force": np.zeros(n), "slip": v[lo, 0] - v[up, 0], "stick": np.zeros(n, bool),
-            "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
-            "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
+    from .eqmodel import edge_contact
+    return edge_contact(system, -contact_tractions(space, sigma, blocks), v)
 
 
 def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -> tuple[np.ndarray, dict]:
@@ -265,7 +254,7 @@ def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -
         start = None if pairs is None else active_from_pairs(space, *pairs)
         y, info = solve_eq_fast(space, start)
         return space.stresses(y), info
-    from .equilibrium import EquilibriumModel
+    from .eqmodel import EquilibriumModel
     model = EquilibriumModel(space)
     info = model.solve(solver, **solver_options)
     return model.stresses(), info

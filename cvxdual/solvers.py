@@ -72,13 +72,15 @@ _ADVICE = {
 
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
-                  verbose: bool = False, run=None, **options) -> dict:
+                  verbose: bool = False, run=None, accept: tuple = ("optimal",), **options) -> dict:
     """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`.
 
     ``advice`` replaces the advice given for a status (e.g. a model that knows the user's
     changes names them); ``time_limit`` (seconds) is passed as the solver's own option
     (:data:`TIME_LIMIT_OPTION`); ``verbose`` prints the solver's log. ``run(opts)``, if given,
     solves ``problem`` in place of ``problem.solve`` and returns the compile time it spent.
+    ``accept``: the statuses returned rather than raised (a caller that certifies the result
+    itself may accept ``optimal_inaccurate``).
     """
     import cvxpy as cp
     opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
@@ -112,7 +114,7 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
                           "check their names and types in the solver's documentation") from None
     wall = time.perf_counter() - t0
     status = problem.status
-    if status != cp.OPTIMAL:
+    if status not in accept:
         ran = getattr(problem.solver_stats, "solve_time", None) or wall  # the solver's own clock, if it reports one
         if time_limit is not None and ran >= 0.99 * time_limit and status in ("user_limit", "optimal_inaccurate"):
             # SCS reports a time-out as 'optimal_inaccurate'

@@ -25,10 +25,13 @@ of the boundary tractions, which makes it an estimate from below, not a certifie
 
 *eq* (:class:`cvxdual.equilibrium.EquilibriumSpace`, the Johnson-Mercier space): exactly
 admissible fields, linear on every sub-triangle; ``vm`` is convex, so capping it at the three
-vertices of every sub-triangle caps it everywhere. After the solve the field is made exact
-(:func:`cvxdual.equilibrium.make_exact`) and its largest vertex value is the certified value:
-an exactly admissible field (for the loads as the eq space represents them: the boundary
-tractions linear on each edge) whose von Mises nowhere exceeds it -- an upper bound on ``k*``.
+vertices of every sub-triangle caps it everywhere. ``cvxdual.build_model(scene,
+stress_space="eq")`` (:class:`cvxdual.eqmodel.EquilibriumModel`) takes the same objective,
+``cp.max(model.von_mises())`` over the sub-triangle vertices. After the solve the model makes the
+field exact (:func:`cvxdual.equilibrium.make_exact`), and the largest von Mises value at the
+vertices of that exact field, ``model.stresses()``, is the certified value: an exactly admissible
+field (for the loads as the eq space represents them: the boundary tractions linear on each
+edge) whose von Mises nowhere exceeds it -- an upper bound on ``k*``.
 
 Why ``k*`` is so low (about 0.2 of the elastic peak)
 ----------------------------------------------------
@@ -51,15 +54,12 @@ from __future__ import annotations
 
 import argparse
 import time
-import warnings
 from pathlib import Path
-from types import SimpleNamespace
 
 import cvxpy as cp
 import numpy as np
 
 import cvxdual
-from cvxdual.equilibrium import EquilibriumSpace, make_exact
 from cvxdual.files import atomic_path, write_text
 from cvxdual.hertz import mcewen_stress
 from cvxdual.invariants import out_of_plane_factor, von_mises
@@ -68,6 +68,8 @@ SCENE = "hertz"
 # a pair carries load if its force exceeds this fraction of the largest: the interior-point
 # solver leaves forces of ~1e-6 of it on pairs that carry none
 CARRIES = 1e-3
+
+
 def exact_elastic_peak(scene=SCENE) -> float:
     """Peak von Mises of the exact (McEwen) elastic field, on the symmetry axis (where it lies
     for Hertz line contact), maximised over a fine depth grid refined once around its maximum."""
@@ -92,7 +94,7 @@ def min_peak_p0(level: int, scene=SCENE) -> dict:
     (``contact_elastic``, ``contact``: the solutions' contact dicts), ``checks``, ``time``, ``model``.
     """
     model = cvxdual.build_model(scene, level=level)
-    factor = out_of_plane_factor(model.system)
+    factor = out_of_plane_factor(model.system.mesh.scene, model.system.pieces.body)
     model.solve()
     sol_el = model.solution()
     peak = float(von_mises(model.stresses(), factor).max())
@@ -119,49 +121,32 @@ def contact_extent(contact: dict) -> float:
     return float(contact["x"][f > CARRIES * f.max()].max())
 
 
-def vertex_factor(space: EquilibriumSpace) -> np.ndarray:
-    """``s33 / (s11 + s22)`` at every vertex value (9 per macro triangle), from the one definition
-    (:func:`cvxdual.invariants.out_of_plane_factor`; raises ModelError for a Hooke-matrix material)."""
-    return out_of_plane_factor(SimpleNamespace(mesh=space.mesh, pieces=SimpleNamespace(body=np.repeat(space.body, 9))))
-
-
 def min_peak_eq(level: int, scene=SCENE) -> dict:
-    """``minimise z`` over exactly admissible Johnson-Mercier fields with ``vm <= z`` at every
-    sub-triangle vertex; then the field made exact and its peak taken as the certified value.
+    """``minimise max vm`` over exactly admissible Johnson-Mercier fields (``vm`` at every
+    sub-triangle vertex); the model makes the field exact, and its peak is the certified value.
 
-    Returns ``solver_value`` (``z``, MPa), ``certified`` (the exact field's peak, MPa), ``residual``
-    (largest admissibility residual, relative to the stress scale), ``status``, ``time``, ``n_unknowns``,
-    ``space``, ``sigma`` (exact vertex values, ``27 n_T``) and ``pressure`` ``(n_c, 2)`` with ``x``
-    ``(n_c, 2)``: the contact pressure at the ends of each contact edge.
+    Returns ``solver_value`` (the solver's objective, MPa), ``certified`` (the exact field's peak,
+    MPa), ``residual`` (largest admissibility residual, relative to the stress scale:
+    ``model.solution()``'s check), ``status``, ``time`` (the solve with the exactness step),
+    ``n_unknowns``, ``post`` (what the exactness step changed), ``model``, ``space``, ``sigma``
+    (exact vertex values, ``(n_sub, 3, 3)``; rows of ``sigma.reshape(-1, 3)`` belong to the bodies
+    ``model.vertex_body``) and ``pressure`` ``(n_c, 2)`` with ``x`` ``(n_c, 2)``: the contact
+    pressure of the exact field at the ends of each contact edge.
     """
-    from cvxdual.bounds import residuals
-    space = EquilibriumSpace.from_scene(cvxdual.load_scene(scene), level)
-    s = space.scales.stress  # the unknowns are nondimensional: y / s, z / s
-    S, sigma0 = space.stress_map, space.sigma0
-    nu = vertex_factor(space)
-    y, z = cp.Variable(space.n_y), cp.Variable()
-    v = cp.reshape(S @ y + sigma0 / s, (len(nu), 3), order="C")  # vertex values, Voigt
-    s33 = cp.multiply(nu, v[:, 0] + v[:, 1])
-    dev = cp.vstack([v[:, 0] - v[:, 1], v[:, 1] - s33, s33 - v[:, 0], np.sqrt(6.0) * v[:, 2]])
-    problem = cp.Problem(cp.Minimize(z), [
-        space.div @ (S @ y) == (space.div_rhs - space.div @ sigma0) / s,  # div sigma + F = 0
-        y[space.contact_y.ravel()] <= 0,  # compressive contact
-        cp.norm(dev, 2, axis=0) / np.sqrt(2.0) <= z,  # vm <= z at every vertex
-    ])
+    model = cvxdual.build_model(scene, level=level, stress_space="eq")
+    model.set_objective(cp.Minimize(cp.max(model.von_mises())))  # in MPa, as for P0
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Solution may be inaccurate")  # certified below
-        problem.solve(solver="CLARABEL")
+    info = model.solve()  # and model.stresses() made exactly admissible
     wall = time.perf_counter() - t0
-    if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
-        raise cvxdual.SolverError(f"eq min peak, level {level}: Clarabel returned '{problem.status}'")
-    y_exact, post = make_exact(space, y.value * s)
-    sigma = S @ y_exact + sigma0
-    return {"level": level, "n_unknowns": space.n_y + 1, "solver_value": float(z.value) * s,
-            "certified": float(von_mises(sigma.reshape(-1, 3), nu).max()),
-            "residual": max(residuals(space, sigma).values()), "status": problem.status, "time": wall,
-            "post": post, "space": space, "sigma": sigma, "x": space.contact_x,
-            "pressure": -y_exact[space.contact_y]}
+    sigma = model.stresses()
+    factor = out_of_plane_factor(model.space.scene, model.vertex_body)
+    sol = model.solution()  # raises AccuracyError unless the exact field is admissible
+    return {"level": level, "n_unknowns": model.space.n_y + 1, "solver_value": float(model.problem.value),
+            "certified": float(von_mises(sigma.reshape(-1, 3), factor).max()),
+            "residual": sol.checks["applied"]["admissibility"], "status": info["status"], "time": wall,
+            "post": {key: info[key] for key in ("contact_change", "projection_iterations", "max_change")},
+            "model": model, "space": model.space, "sigma": sigma, "x": model.space.contact_x,
+            "pressure": sol.contact["edge_pressure"]}
 
 
 def plot_ratio(p0: list[dict], eq: list[dict], exact: float, ax=None):

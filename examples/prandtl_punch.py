@@ -35,11 +35,17 @@ stresses are not capped. The result is a conic program::
     subject to  div(S y + alpha sigma0) = 0,   sigma_nn(contact) <= 0,
                 tau(S y + alpha sigma0) <= k  at the 9 vertices of every block triangle.
 
-An interior-point solver returns ``(y, alpha)`` to about 1e-8, not exactly; the *certified* value
-makes the field exact (:func:`cvxdual.equilibrium.make_exact`: contact tractions clipped and
-balanced, ``div sigma = 0`` projected to rounding) and scales it by ``1 / max(1, max tau / k)``.
-The problem is homogeneous in the load (no body force), so the scaled field is admissible for the
-scaled load: that number is a lower bound, not an approximation of one.
+:func:`cvxdual.build_model` with ``stress_space="eq", limit_analysis=True`` builds all of it but
+the yield rows (an :class:`cvxdual.eqmodel.EquilibriumModel`: ``load_factor`` is ``alpha``, a
+variable, maximised); ``model.add_constraint(model.shear_cap(k, where=model.vertex_body == 1))``
+adds them. An interior-point solver returns ``(y, alpha)`` to about 1e-8, not exactly; after the
+solve the model makes the field exact per unit load (:func:`cvxdual.equilibrium.make_exact`:
+contact tractions clipped and balanced, ``div sigma = 0`` projected to rounding), so
+``model.stresses()`` is exactly admissible for the load ``alpha q`` -- but only inside the yield
+set to the solver's tolerance. The *certified* value scales it by ``1 / max(1, max tau / k)``,
+``max tau`` over the vertices of that exact field. The problem is homogeneous in the load (no
+body force), so the scaled field is admissible for the scaled load: that number is a lower bound,
+not an approximation of one.
 
 Why the paper's piecewise-constant (P0) stresses give no bound
 --------------------------------------------------------------
@@ -60,23 +66,20 @@ from __future__ import annotations
 
 import argparse
 import time
-import warnings
 from pathlib import Path
 
-import cvxpy as cp
 import numpy as np
-import scipy.sparse as sp
 
 import cvxdual
-from cvxdual.bounds import residuals
-from cvxdual.equilibrium import EquilibriumSpace, make_exact
 from cvxdual.files import atomic_path, write_text
+from cvxdual.invariants import shear_stress
 
 K = 1.0  # shear yield stress k
 B = 1.0  # punch half-width b
 PRANDTL = 2.0 + np.pi  # q_lim / k on a half-space
-# Clarabel's default regularisation ends in NumericalError on this degenerate optimal face; 1e-7
-# converges (status 'optimal' or 'optimal_inaccurate', the latter repaired by the certification)
+# Clarabel's default regularisation fails (NumericalError, at level 1) on this degenerate optimal
+# face; 1e-7 converges (status 'optimal' or 'optimal_inaccurate': the model accepts the latter, as
+# its exactness step and the certification below repair what the solver leaves)
 CLARABEL = {"static_regularization_constant": 1e-7}
 
 
@@ -105,62 +108,37 @@ def punch_scene(width: float = 5.0, depth: float = 3.0) -> dict:
                                    "bottom": {"on": "far", "kind": "clamped"}}}}}
 
 
-def deviator_rows(space: EquilibriumSpace) -> sp.csr_matrix:
-    """``D (2 m, 27 n_T)``: ``((s11 - s22) / 2, s12)`` at the ``m = 9 n_block`` sub-triangle vertices
-    of the block, from the vertex values: ``tau_i = hypot((D sigma)[i], (D sigma)[m + i])``."""
-    t = np.flatnonzero(space.body == 1)
-    v = (9 * t[:, None] + np.arange(9)[None, :]).ravel()  # vertex value triples 3 v .. 3 v + 2
-    m = len(v)
-    rows = np.concatenate([np.arange(m), np.arange(m), m + np.arange(m)])
-    cols = np.concatenate([3 * v, 3 * v + 1, 3 * v + 2])
-    vals = np.concatenate([np.full(m, 0.5), np.full(m, -0.5), np.ones(m)])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(2 * m, 27 * space.n_tri))
-
-
-def max_shear(D: sp.csr_matrix, sigma: np.ndarray) -> float:
-    """``max tau`` over the block of vertex values ``sigma`` (the maximum over each sub-triangle)."""
-    return float(np.max(np.hypot(*(D @ sigma).reshape(2, -1))))
-
-
 def limit_load_eq(level: int, k: float = K) -> dict:
     """Lower-bound limit analysis in the equilibrium space at mesh ``level``.
 
     Returns ``alpha`` (the solver's ``q_lim / k``), ``alpha_certified`` (the certified lower bound),
     ``ratio`` (``alpha_certified / (2 + pi)``), ``n_unknowns`` (``y`` and ``alpha``), ``time`` (the
-    solve, seconds), ``max_tau`` (``max tau / k`` of the certified field), ``residual`` (the largest
-    violation of any admissibility constraint by ``stress_unit``, relative to the stress scale),
-    ``status`` (the solver's) and, to check it, ``space`` and ``stress_unit``: vertex values of an
-    exactly admissible field for the unit load ``q = 1``. The certified field is ``alpha_certified * stress_unit``.
+    solve with the model's exactness step, seconds), ``max_tau`` (``max tau / k`` of the certified
+    field), ``residual`` (the largest violation of any admissibility constraint by ``stress_unit``,
+    relative to the stress scale: ``model.solution()``'s check), ``status`` (the solver's), ``post``
+    (what the exactness step changed), ``model`` and, to check it, ``space`` and ``stress_unit``:
+    ``(n_sub, 3, 3)`` vertex values of an exactly admissible field for the unit load ``q = 1``. The
+    certified field is ``alpha_certified * stress_unit``.
     """
-    space = EquilibriumSpace.from_scene(cvxdual.load_scene(punch_scene()), level)
-    s = space.scales.stress  # the variables are nondimensional: y / s, stresses / s
-    S, sigma0 = space.stress_map, space.sigma0  # sigma = S y + sigma0 for the unit load
-    D = deviator_rows(space)
-    y, alpha = cp.Variable(space.n_y), cp.Variable()
-    sigma = S @ y + alpha * (sigma0 / s)
-    dev = cp.reshape(D @ sigma, (2, D.shape[0] // 2), order="C")
-    problem = cp.Problem(cp.Maximize(alpha), [
-        space.div @ sigma == 0,  # div sigma = 0 (no body force)
-        y[space.contact_y.ravel()] <= 0,  # compressive contact
-        cp.SOC(np.full(dev.shape[1], k / s), dev, axis=0),  # tau <= k at the block's vertices
-    ])
+    model = cvxdual.build_model(punch_scene(), level=level, stress_space="eq", limit_analysis=True)
+    block = model.vertex_body == 1  # the punch (body 0) is rigid: uncapped
+    model.add_constraint(model.shear_cap(k, where=block), name="yield")  # one cone per block vertex
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Solution may be inaccurate")  # certified below
-        problem.solve(solver="CLARABEL", **CLARABEL)
+    info = model.solve(**CLARABEL)  # and model.stresses() made exactly admissible
     wall = time.perf_counter() - t0
-    if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
-        raise cvxdual.SolverError(f"eq limit analysis, level {level}: Clarabel returned '{problem.status}'")
-    a = float(alpha.value)
-    # certification: the field per unit load, made exactly admissible, then scaled into the yield set
-    y_unit, post = make_exact(space, y.value * s / a)
-    stress_unit = S @ y_unit + sigma0
-    tau_unit = max_shear(D, stress_unit)  # max tau for q = 1
-    certified = a / max(1.0, a * tau_unit / k)
-    return {"level": level, "n_unknowns": space.n_y + 1, "alpha": a, "alpha_certified": certified,
-            "ratio": certified / PRANDTL, "time": wall, "status": problem.status,
-            "max_tau": certified * tau_unit / k, "residual": max(residuals(space, stress_unit).values()),
-            "post": post, "space": space, "stress_unit": stress_unit}
+    a = float(model.load_factor.value)
+    # certification: the exact field at the solver's alpha meets tau <= k only to the solver's
+    # tolerance; scaled by 1 / max(1, max tau / k) it lies in the yield set, and (no body force)
+    # it is exactly admissible for the scaled load
+    stress = model.stresses()  # exactly admissible for alpha q
+    tau = float(shear_stress(stress.reshape(-1, 3))[block].max())  # the numpy twin of model.shear_stress()
+    certified = a / max(1.0, tau / k)
+    sol = model.solution()  # raises AccuracyError unless the exact field is admissible ('yield': to 1e-6)
+    return {"level": level, "n_unknowns": model.space.n_y + 1, "alpha": a, "alpha_certified": certified,
+            "ratio": certified / PRANDTL, "time": wall, "status": info["status"],
+            "max_tau": certified / a * tau / k, "residual": sol.checks["applied"]["admissibility"],
+            "post": {key: info[key] for key in ("contact_change", "projection_iterations", "max_change")},
+            "model": model, "space": model.space, "stress_unit": stress / a}
 
 
 def limit_load_p0(level: int, k: float = K) -> dict:
@@ -171,7 +149,7 @@ def limit_load_p0(level: int, k: float = K) -> dict:
     """
     model = cvxdual.build_model(punch_scene(), level=level, limit_analysis=True)
     block = np.flatnonzero(model.system.pieces.body == 1)  # the punch (body 0) is rigid: uncapped
-    model.add_constraint(model.shear_stress()[block] <= k, name="yield")
+    model.add_constraint(model.shear_cap(k, where=block), name="yield")
     t0 = time.perf_counter()
     try:
         model.solve()

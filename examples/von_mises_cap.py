@@ -28,7 +28,7 @@ With ``k = 0.9 x`` (the P0 elastic peak)::
     minimise  S(t) = 1/2 t.A_h t - t.E^T q0     (complementary energy)
     over      P0 stresses t, statically admissible (the package's rows: weak equilibrium,
               compressive frictionless contact),
-    s.t.      vm(t_P) <= k  on every piece P       (model.add_constraint(vm <= k))
+    s.t.      vm(t_P) <= k  on every piece P       (model.add_constraint(model.von_mises_cap(k)))
 
 The elastic field is the minimiser without the cap, so ``S`` can only rise; the cap is active
 (the peak sits at ``k``) on a patch of pieces around the old peak.
@@ -111,7 +111,7 @@ def cap_study(level: int, fraction: float = CAP_FRACTION, scene=SCENE) -> dict:
     """
     model = cvxdual.build_model(scene, level=level)
     s = model.system
-    factor = out_of_plane_factor(s)  # nu per piece (plane strain)
+    factor = out_of_plane_factor(s.mesh.scene, s.pieces.body)  # nu per piece (plane strain)
     field = cvxdual.exact_field(s.mesh.scene)
     hz = field.hertz
     t0 = time.perf_counter()
@@ -124,7 +124,7 @@ def cap_study(level: int, fraction: float = CAP_FRACTION, scene=SCENE) -> dict:
     peak = float(vm_el.max())
     cap = fraction * peak
 
-    model.add_constraint(model.von_mises() <= cap, name="von Mises cap")
+    model.add_constraint(model.von_mises_cap(cap), name="von Mises cap")
     t0 = time.perf_counter()
     model.solve()
     t_cap = time.perf_counter() - t0
@@ -212,7 +212,7 @@ def plot_axis_profile(r: dict, ax=None):
     a = hz.a
     y = np.linspace(-WINDOW * a, WINDOW * a, 801)
     sx, sz, txz = mcewen_stress(np.zeros_like(y), np.abs(y), a, hz.p0)
-    nu = out_of_plane_factor(s)[0]  # hertz: one nu for both bodies
+    nu = out_of_plane_factor(s.mesh.scene, s.pieces.body)[0]  # hertz: one nu for both bodies
     ax.plot(von_mises(np.column_stack([sx, sz, txz]), nu), y, "k-", lw=1.0, label="exact (McEwen)")
     p = s.pieces
     on_axis = np.sum(np.abs(p.tri_vertices[:, :, 0]) < 1e-9 * s.scales.length, axis=1) >= 2

@@ -17,7 +17,8 @@ from cvxdual.eqfast import (
     solve_eq_fast,
     triangle_dofs,
 )
-from cvxdual.equilibrium import EquilibriumModel, EquilibriumSpace
+from cvxdual.eqmodel import EquilibriumModel
+from cvxdual.equilibrium import EquilibriumSpace
 from cvxdual.errors import SolverError
 
 # Clarabel stops at relative gaps ~1e-8: its stresses differ from the exact optimum by ~1e-8-1e-7

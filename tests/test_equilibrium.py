@@ -19,7 +19,8 @@ from cvxdual.bounds import (
     residuals,
     vtu_cells,
 )
-from cvxdual.equilibrium import EquilibriumModel, EquilibriumSpace, make_exact, rigid_modes
+from cvxdual.eqmodel import EquilibriumModel
+from cvxdual.equilibrium import EquilibriumSpace, make_exact, rigid_modes
 from cvxdual.errors import SceneError
 from cvxdual.jm import divergence_rows, edge_dof_rows, internal_rows, local_basis
 
