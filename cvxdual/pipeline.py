@@ -238,10 +238,10 @@ def recover(model, triangulation: str | None = None, level: int | None = None, i
 # -- the equilibrium stress space (docs/equilibrium.md) -----------------------------------
 
 def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray, blocks: dict) -> dict:
-    """Contact quantities of equilibrium stresses at the pairs (:func:`cvxdual.eqmodel.edge_contact`
+    """Contact quantities of equilibrium stresses at the pairs (:func:`cvxdual.solution.edge_contact`
     of the contact tractions read from the lower face)."""
     from .bounds import contact_tractions
-    from .eqmodel import edge_contact
+    from .solution import edge_contact
     return edge_contact(system, -contact_tractions(space, sigma, blocks), v)
 
 
