@@ -8,7 +8,7 @@ frictionless contact ``sigma_nn <= 0``. The default objective is ``S(sigma) + L(
 complementary energy with the gap term. After every solve the field is made exactly
 admissible (:func:`~cvxdual.equilibrium.make_exact`, per unit load), so its stresses are
 statically admissible to rounding whatever the user changed: a user's convex constraint on
-them (``shear_stress() <= k``) holds at the vertices, where a convex function of a linear
+them (``shear_cap(k)``) holds at the vertices, where a convex function of a linear
 field is largest, hence everywhere.
 """
 
@@ -37,15 +37,18 @@ class EquilibriumModel(ConvexModel):
     the field is exact and inside the yield set).
 
     An interior-point solver may stop at ``optimal_inaccurate`` on the degenerate problems of
-    limit analysis; that status is accepted here because :meth:`solve` makes the field exact and
-    :meth:`solution` checks it and the user's constraints at that exact field.
+    limit analysis; that status is accepted there (only) because :meth:`solve` makes the field
+    exact and :meth:`solution` checks it and the user's constraints at that exact field, and a
+    load factor short of the optimum is still a lower bound.
     """
 
     what = "equilibrium dual"
-    _accept = ("optimal", "optimal_inaccurate")
 
     def __init__(self, space: EquilibriumSpace, limit_analysis: bool = False, system=None):
         self._start(limit_analysis)
+        # limit analysis' degenerate optimum: Clarabel may stop short of its tolerances; the field
+        # is made exact and checked anyway, and a load factor below the optimum is still a bound
+        self._accept = ("optimal", "optimal_inaccurate") if self.limit_analysis else ("optimal",)
         self.space = space
         self.system = system  # the P0 system of the same mesh, for Solution (built on demand)
         sc = space.scales
@@ -104,9 +107,6 @@ class EquilibriumModel(ConvexModel):
         """Solve (see :meth:`ConvexModel.solve`), then make the field exactly admissible:
         divided by the load factor (the exactness step is written for the unit load), made
         exact, multiplied back. Returns an info dict (status, times, sizes, the step's changes)."""
-        if not self.limit_analysis and not float(self.load_factor.value) > 0:
-            raise ModelError("load_factor must be positive in the equilibrium space (its exactness step works per "
-                             "unit load); with no load the solution is zero")
         stats = super().solve(solver, time_limit, verbose, **options)
         try:
             lf = float(self.load_factor.value)

@@ -12,10 +12,13 @@ it compiles once (see :meth:`ConvexModel._runner`).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
+from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
+from cvxpy.reductions.solvers.defines import CONIC_SOLVERS
 
 from .errors import ModelError
 from .solvers import DEFAULT_SOLVER, resolve_solver, solve_problem
@@ -33,6 +36,25 @@ USER_TOLERANCE = 1e-6
 SCALED_TOLERANCES = {"tol_gap_abs": 2, "tol_gap_rel": 1, "tol_feas": 1, "tol_ktratio": 1}  # powers of lf
 CLARABEL_DEFAULTS = {"tol_gap_abs": 1e-8, "tol_gap_rel": 1e-8, "tol_feas": 1e-8, "tol_ktratio": 1e-6}
 SMALLEST_SCALED = 1e-4
+
+# keywords of cvxpy.Problem.solve itself, not of a solver: a solve with any of them goes through
+# CVXPY (the cached re-solve hands options to the solver alone)
+CVXPY_OPTIONS = {"gp", "qcp", "requires_grad", "enforce_dpp", "ignore_dpp", "canon_backend", "warm_start",
+                 "solver_path", "bounds"}
+
+
+@dataclass
+class _RhsCache:
+    """A load_factor sweep's solver data (see :meth:`ConvexModel._runner`): ``pending`` until
+    the second solve builds it; ``data`` None where the right-hand side is not all that changes."""
+
+    key: tuple
+    pending: bool = False
+    data: dict | None = None
+    chain: object = None
+    inverse: object = None
+    b0: np.ndarray | None = None
+    b1: np.ndarray | None = None
 
 
 class ConvexModel:
@@ -53,7 +75,7 @@ class ConvexModel:
         self._version = 0  # bumped by every change of the problem
         self._solved = None  # (version, parameter values, solver, options) of the last solve
         self._problem = None
-        self._rhs = None  # (key, data, chain, inverse data, b0, b1): re-solves that change load_factor only
+        self._rhs: _RhsCache | None = None  # re-solves that change load_factor only
         self.info: dict = {}
 
     def _changed(self) -> None:
@@ -106,7 +128,7 @@ class ConvexModel:
             raise ModelError("add_constraint needs at least one constraint, e.g. model.von_mises() <= 500")
         for c in constraints:
             if not isinstance(c, cp.constraints.Constraint):
-                raise ModelError(f"add_constraint takes cvxpy constraints (such as model.shear_stress() <= k), got "
+                raise ModelError(f"add_constraint takes cvxpy constraints (such as model.shear_cap(k)), got "
                                  f"{type(c).__name__}: build it from the model's expressions, not from numbers")
             if not c.is_dcp():
                 raise ModelError(f"constraint {c!s:.80} is not convex (not DCP); only convex constraints keep "
@@ -158,34 +180,50 @@ class ConvexModel:
         """The constraint ``shear_stress() <= k`` at the points ``where`` (a mask or indices;
         all by default), ``k`` a number or one per point, as direct cones."""
         s = self.stress
-        rows = self._at(cp.vstack([0.5 * (s[:, 0] - s[:, 1]), s[:, 2]]), where)
+        rows = self._at(cp.vstack([0.5 * (s[:, 0] - s[:, 1]), s[:, 2]]), where, "shear_cap")
         return cp.SOC(self._bound(k, rows.shape[1], "shear_cap"), rows, axis=0)
 
     def von_mises_cap(self, k, where=None) -> cp.Constraint:
         """The constraint ``von_mises() <= k`` at the points ``where`` (a mask or indices; all by
         default), ``k`` a number or one per point, as direct cones."""
-        rows = self._at(self._von_mises_rows(), where)
+        rows = self._at(self._von_mises_rows(), where, "von_mises_cap")
         return cp.SOC(np.sqrt(2.0) * self._bound(k, rows.shape[1], "von_mises_cap"), rows, axis=0)
 
     @staticmethod
-    def _at(rows, where):
-        """The columns (points) ``where`` of ``rows``: all, a boolean mask or indices."""
+    def _at(rows, where, what: str):
+        """The columns (points) ``where`` of ``rows``: all, a boolean mask of every point, or
+        integer indices of some."""
         if where is None:
             return rows
+        n = rows.shape[1]
         w = np.asarray(where)
-        return rows[:, np.flatnonzero(w) if w.dtype == bool else w]
+        if w.dtype == bool:
+            if w.shape != (n,):
+                raise ModelError(f"{what}: where= as a mask needs one boolean per point ({n}), got shape {w.shape}")
+            w = np.flatnonzero(w)
+        elif w.ndim != 1 or w.dtype.kind not in "iu" or (len(w) and (w.min() < -n or w.max() >= n)):
+            raise ModelError(f"{what}: where= takes a boolean mask of the {n} points or a 1-d array of integer "
+                             f"indices below {n}, got {where!r:.60}")
+        if not len(w):
+            raise ModelError(f"{what}: where= selects no point; give at least one")
+        return rows[:, w]
 
     @staticmethod
     def _bound(k, n: int, what: str):
-        """``k`` broadcast to ``n`` points: a positive number or array, or a cvxpy Parameter."""
+        """``k`` broadcast to ``n`` points: a non-negative number or array, or a non-negative
+        Parameter of shape () or (n,)."""
         if isinstance(k, cp.Expression):
-            return k if k.size == n else k * np.ones(n)
+            if k.shape not in ((), (n,)):
+                raise ModelError(f"{what}: k as a cvxpy expression must have shape () or ({n},), got {k.shape}")
+            return k if k.shape == (n,) else cp.multiply(k, np.ones(n))
+        if isinstance(k, (str, bytes, bool)):
+            raise ModelError(f"{what}: k must be a number, got {k!r}")
         try:
             b = np.broadcast_to(np.asarray(k, dtype=float), (n,))
         except (TypeError, ValueError):
             raise ModelError(f"{what}: k must be a number or one value per capped point ({n}), got "
                              f"{type(k).__name__}") from None
-        if isinstance(k, bool) or not np.all(np.isfinite(b)) or np.any(b < 0):
+        if not np.all(np.isfinite(b)) or np.any(b < 0):
             raise ModelError(f"{what}: k must be finite and non-negative, got {k!r}")
         return b
 
@@ -205,11 +243,14 @@ class ConvexModel:
         if solver == "FAST":
             raise ModelError("the fast path solves the package's own problem, not a model; use solver='CLARABEL'")
         if self.limit_analysis and not self._user:
-            raise ModelError("limit analysis needs yield constraints, e.g. model.add_constraint(model.shear_stress() "
-                             "<= k); without them any load is carried")
+            raise ModelError("limit analysis needs yield constraints, e.g. model.add_constraint(model.shear_cap(k)); "
+                             "without them any load is carried")
         for p in self.problem.parameters():
             if p.value is None:
                 raise ModelError(f"parameter {p.name()!r} has no value; set {p.name()}.value before solving")
+        if not self.limit_analysis and not float(self.load_factor.value) > 0:
+            raise ModelError("load_factor must be positive: with no load nothing acts and the stresses are zero "
+                             "(the checks are relative to the load)")
         for p in self.problem.parameters():
             if not np.all(np.isfinite(p.value)):
                 raise ModelError(f"parameter {p.name()!r} has a non-finite value; give a finite one (a stuck pair "
@@ -224,7 +265,8 @@ class ConvexModel:
         if changes:
             what = ", ".join(changes)
             advice = {"infeasible": f"no stress field satisfies the model with your changes ({what}); the "
-                                    "scene's own constraints are satisfiable, so relax those changes",
+                                    "scene's own constraints are satisfiable, so relax those changes (a cap "
+                                    "written as von_mises() <= k may be misreported: use model.von_mises_cap(k))",
                       "infeasible_inaccurate": f"the solver suspects your changes ({what}) leave no admissible "
                                                "stress field; relax them, or try another solver",
                       "unbounded": f"the objective is unbounded over the admissible stresses with your changes "
@@ -233,7 +275,7 @@ class ConvexModel:
                                               "bound it with constraints"}
         run = self._runner(solver, verbose, options)
         self.info = solve_problem(self.problem, solver, self.what, advice, time_limit, verbose, run=run,
-                                  accept=self._accept, **{**self._scaled_tolerances(solver, options), **options})
+                                  accept=self._accept, defaults=self._scaled_tolerances(solver, options), **options)
         self._solved = key
         return self.info
 
@@ -249,46 +291,48 @@ class ConvexModel:
 
     def _runner(self, solver: str, verbose: bool, options: dict):
         """``run(opts)`` for :func:`solve_problem`: CVXPY's solve, except when only ``load_factor``
-        changed since the last solve of this problem. The solver's data then differ in ``b`` only,
-        ``b = b0 + load_factor b1`` (DPP: affine in the parameter), and the solver is called on the
-        cached data with that ``b``: CVXPY's recompile (the parameter applied to the whole canonical
-        tensor, ``O(nnz)``) is skipped. ``b0``, ``b1`` come from two of CVXPY's cached compiles (at
-        0 and 1) at the second such solve, which also checks that nothing but ``b`` changes. The
-        cache is keyed on the user's ``options``: the tolerances scaled to the load factor steer
-        the solver only, not its data."""
+        changed since the last solve of this problem. In a DPP problem whose ``load_factor`` enters
+        the solver's right-hand side alone, the data then differ in ``b = b0 + load_factor b1``
+        only (affine: DPP problems are affine in their parameters), and the solver is called on
+        the cached data with that ``b``: CVXPY's recompile (the parameter applied to the whole
+        canonical tensor, ``O(nnz)``) is skipped. ``b0``, ``b1`` come from two of CVXPY's cached
+        compiles (at 0 and 1) at the second such solve, which also checks that nothing but ``b``
+        changes. The cache is keyed on the user's ``options``: the tolerances scaled to the load
+        factor steer the solver only, not its data."""
         problem = self.problem
         lf = self.load_factor
+        cacheable = (not self.limit_analysis and solver in CONIC_SOLVERS and not set(options) & CVXPY_OPTIONS
+                     and problem.is_dpp())
+
+        def cvxpy_solve(opts: dict) -> float:
+            problem.solve(solver=solver, verbose=bool(verbose), **opts)
+            return problem.compilation_time
 
         def run(opts: dict) -> float:
             others = tuple(np.asarray(p.value).tobytes() for p in problem.parameters() if p is not lf)
             key = (self._version, others, solver, repr(sorted(options.items())))
-            state = self._rhs if self._rhs is not None and self._rhs[0] == key else None
-            if self.limit_analysis or state is None or state[1] is False:
-                problem.solve(solver=solver, verbose=bool(verbose), **opts)
-                if state is None:
-                    self._rhs = (key, None)  # the next solve with this key builds the affine b
-                return problem.compilation_time
+            cache = self._rhs if self._rhs is not None and self._rhs.key == key else None
+            if not cacheable or cache is None or cache.data is None and not cache.pending:
+                if cacheable and cache is None:
+                    self._rhs = _RhsCache(key, pending=True)  # the next solve with this key builds b0, b1
+                return cvxpy_solve(opts)
             t0 = time.perf_counter()
-            if state[1] is None:
-                parts = self._affine_rhs(problem, solver, opts)
-                if parts is None:  # load_factor is not in b alone: CVXPY from now on
-                    self._rhs = (key, False)
-                    problem.solve(solver=solver, verbose=bool(verbose), **opts)
-                    return problem.compilation_time
-                self._rhs = state = (key, *parts)
-            _, data, chain, inverse, b0, b1 = state
-            data = {**data, "b": b0 + float(lf.value) * b1}
+            if cache.pending:
+                self._rhs = cache = self._affine_rhs(problem, solver, opts, key)
+                if cache.data is None:  # load_factor is not in b alone: CVXPY from now on
+                    return cvxpy_solve(opts)
+            data = {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
             compile_time = time.perf_counter() - t0
-            problem.unpack_results(chain.solve_via_data(problem, data, False, bool(verbose), opts), chain, inverse)
+            problem.unpack_results(cache.chain.solve_via_data(problem, data, False, bool(verbose), opts),
+                                   cache.chain, cache.inverse)
             return compile_time
 
         return run
 
-    def _affine_rhs(self, problem, solver: str, opts: dict):
-        """``(data at load_factor 0, chain, inverse data, b0, b1)`` with ``b1 = b(1) - b(0)``, or
-        ``None`` unless the solver takes conic data and ``b`` alone depends on ``load_factor`` (a
-        user's constraint may multiply a variable by it)."""
-        from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
+    def _affine_rhs(self, problem, solver: str, opts: dict, key) -> _RhsCache:
+        """The cache of :meth:`_runner`: the data at ``load_factor`` 0 with ``b1 = b(1) - b(0)``,
+        or no data where anything but ``b`` depends on ``load_factor`` (a user's constraint may
+        multiply a variable by it)."""
         lf = self.load_factor
         value = lf.value
         try:
@@ -298,14 +342,14 @@ class ConvexModel:
             one = problem.get_problem_data(solver, solver_opts=opts)[0]
         finally:
             lf.value = value
-        if not isinstance(chain.solver, ConicSolver):
-            return None
+        if not isinstance(chain.solver, ConicSolver):  # a solver on both lists may get QP data instead
+            return _RhsCache(key)
         for k, v in data.items():
             w = one[k]
             changed = (v != w).nnz if sp.issparse(v) else isinstance(v, np.ndarray) and not np.array_equal(v, w)
             if k != "b" and changed:
-                return None
-        return data, chain, inverse, data["b"], one["b"] - data["b"]
+                return _RhsCache(key)
+        return _RhsCache(key, data=data, chain=chain, inverse=inverse, b0=data["b"], b1=one["b"] - data["b"])
 
     def _require_solved(self) -> None:
         if self._solved is None:

@@ -72,7 +72,8 @@ _ADVICE = {
 
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
-                  verbose: bool = False, run=None, accept: tuple = ("optimal",), **options) -> dict:
+                  verbose: bool = False, run=None, accept: tuple = ("optimal",), defaults: dict | None = None,
+                  **options) -> dict:
     """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`.
 
     ``advice`` replaces the advice given for a status (e.g. a model that knows the user's
@@ -80,10 +81,11 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
     (:data:`TIME_LIMIT_OPTION`); ``verbose`` prints the solver's log. ``run(opts)``, if given,
     solves ``problem`` in place of ``problem.solve`` and returns the compile time it spent.
     ``accept``: the statuses returned rather than raised (a caller that certifies the result
-    itself may accept ``optimal_inaccurate``).
+    itself may accept ``optimal_inaccurate``). ``defaults``: options the caller sets unless
+    ``options`` does (not named in messages about the user's options).
     """
     import cvxpy as cp
-    opts = {**SOLVER_OPTIONS.get(solver, {}), **options}
+    opts = {**SOLVER_OPTIONS.get(solver, {}), **(defaults or {}), **options}
     if time_limit is not None:
         if solver not in TIME_LIMIT_OPTION:
             raise SolverError(f"{what}: solver {solver} has no time limit; use one of "

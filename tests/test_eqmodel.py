@@ -116,3 +116,23 @@ def test_caps_are_the_same_set_as_the_measures():
         model.shear_cap(-1.0)
     where = model.system.pieces.body == 1
     assert model.von_mises_cap(1e9, where=where).args[1].shape[1] == int(where.sum())
+
+
+def test_cap_arguments_are_checked():
+    model = cd.build_model("patch", level=0)
+    n = model.system.n_pieces
+    for where, words in ((np.ones(3, bool), "one boolean per point"), (np.array([0.5]), "integer"),
+                         (np.zeros(n, bool), "no point"), (np.array([n]), "below")):
+        with pytest.raises(cd.ModelError, match=words):
+            model.shear_cap(1.0, where=where)
+    for k, words in (("100", "number"), (cp.Parameter((2,)), r"shape \(\) or")):
+        with pytest.raises(cd.ModelError, match=words):
+            model.von_mises_cap(k)
+    k = cp.Parameter(nonneg=True, value=1e3)
+    assert model.von_mises_cap(k).is_dcp()  # a parameter bound: a sweep over caps compiles once
+
+
+def test_eq_accepts_inaccurate_only_in_limit_analysis():
+    model = cd.build_model("hertz", level=1, stress_space="eq")
+    with pytest.raises(cd.SolverError, match="inaccurate"):
+        model.solve(max_iter=8)  # stopped early: not optimal, so not returned

@@ -295,3 +295,25 @@ def test_friction_refuses_a_body_that_slides_freely():
     assert model.changes() == [] and set(model.constraints) == {"equilibrium", "contact"}
     model.solve()
     assert model.solution().checks["skipped"] == {}
+
+
+@pytest.mark.filterwarnings("ignore:You are solving a parameterized problem that is not DPP")  # the point here
+def test_cached_resolve_only_for_dpp_and_solver_options(model):
+    """A constraint that is not DPP (a product of parameters) is not affine in load_factor: the
+    cached right-hand side would be wrong, so such sweeps go through CVXPY; so do options that
+    CVXPY itself takes."""
+    lf = model.load_factor
+    model.add_constraint(model.stress[:, 1] >= -0.95 * 35000.0 * (lf + lf * lf) / 2.0, name="not DPP")
+    fresh = cd.build_model("hertz", level=1)
+    f = fresh.load_factor
+    fresh.add_constraint(fresh.stress[:, 1] >= -0.95 * 35000.0 * (f + f * f) / 2.0, name="not DPP")
+    for v in (1.0, 0.5, 0.3):
+        model.load_factor.value = v
+        model.solve()
+    fresh.load_factor.value = 0.3
+    fresh.solve()
+    assert rel(model.stresses(), fresh.stresses()) < 1e-5  # the same problem, CVXPY both times
+    swept = cd.build_model("hertz", level=1)
+    for v in (1.0, 0.5, 0.3):  # CVXPY's own keyword: never handed to Clarabel
+        swept.load_factor.value = v
+        swept.solve(canon_backend="SCIPY")
