@@ -45,11 +45,10 @@ CVXPY_OPTIONS = {"gp", "qcp", "requires_grad", "enforce_dpp", "ignore_dpp", "can
 
 @dataclass
 class _RhsCache:
-    """A load_factor sweep's solver data (see :meth:`ConvexModel._runner`): ``pending`` until
-    the second solve builds it; ``data`` None where the right-hand side is not all that changes."""
+    """A load_factor sweep's solver data (see :meth:`ConvexModel._runner`); ``b0`` None where
+    the right-hand side is not all that changes with the load factor."""
 
     key: tuple
-    pending: bool = False
     data: dict | None = None
     chain: object = None
     inverse: object = None
@@ -290,37 +289,41 @@ class ConvexModel:
         return {k: CLARABEL_DEFAULTS[k] * f ** SCALED_TOLERANCES[k] for k in SCALED_TOLERANCES}
 
     def _runner(self, solver: str, verbose: bool, options: dict):
-        """``run(opts)`` for :func:`solve_problem`: CVXPY's solve, except when only ``load_factor``
-        changed since the last solve of this problem. In a DPP problem whose ``load_factor`` enters
-        the solver's right-hand side alone, the data then differ in ``b = b0 + load_factor b1``
-        only (affine: DPP problems are affine in their parameters), and the solver is called on
-        the cached data with that ``b``: CVXPY's recompile (the parameter applied to the whole
-        canonical tensor, ``O(nnz)``) is skipped. ``b0``, ``b1`` come from two of CVXPY's cached
-        compiles (at 0 and 1) at the second such solve, which also checks that nothing but ``b``
-        changes. The cache is keyed on the user's ``options``: the tolerances scaled to the load
-        factor steer the solver only, not its data."""
+        """``run(opts)`` for :func:`solve_problem`. In a DPP problem whose ``load_factor`` enters
+        the solver's right-hand side alone, the solver's data at any load factor differ in
+        ``b = b0 + load_factor b1`` only (DPP problems are affine in their parameters). The first
+        solve therefore compiles once (CVXPY), applies ``load_factor = 0`` to CVXPY's cached
+        program for ``b0`` and checks that nothing else changed; every later solve that changes
+        only ``load_factor`` hands the solver the cached data with the new ``b``, skipping CVXPY's
+        recompile (the parameter applied to the whole canonical tensor, ``O(nnz)``). Anything
+        else (a change of the model or of another parameter, CVXPY's own keywords, a QP
+        solver, a non-DPP problem) goes through CVXPY. The cache is keyed on the user's
+        ``options``: the tolerances scaled to the load factor steer the solver, not its data."""
         problem = self.problem
         lf = self.load_factor
         cacheable = (not self.limit_analysis and solver in CONIC_SOLVERS and not set(options) & CVXPY_OPTIONS
                      and problem.is_dpp())
 
-        def cvxpy_solve(opts: dict) -> float:
-            problem.solve(solver=solver, verbose=bool(verbose), **opts)
-            return problem.compilation_time
-
         def run(opts: dict) -> float:
+            if not cacheable:
+                problem.solve(solver=solver, verbose=bool(verbose), **opts)
+                return problem.compilation_time
             others = tuple(np.asarray(p.value).tobytes() for p in problem.parameters() if p is not lf)
             key = (self._version, others, solver, repr(sorted(options.items())))
-            cache = self._rhs if self._rhs is not None and self._rhs.key == key else None
-            if not cacheable or cache is None or cache.data is None and not cache.pending:
-                if cacheable and cache is None:
-                    self._rhs = _RhsCache(key, pending=True)  # the next solve with this key builds b0, b1
-                return cvxpy_solve(opts)
             t0 = time.perf_counter()
-            if cache.pending:
-                self._rhs = cache = self._affine_rhs(problem, solver, opts, key)
-                if cache.data is None:  # load_factor is not in b alone: CVXPY from now on
-                    return cvxpy_solve(opts)
+            cache = self._rhs if self._rhs is not None and self._rhs.key == key else None
+            if cache is None:
+                data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
+                cache = self._rhs = self._affine_rhs(problem, solver, opts, key, data, chain)
+                if cache.b0 is None:  # load_factor is not in b alone: these data, then CVXPY
+                    compile_time = time.perf_counter() - t0
+                    problem.unpack_results(chain.solve_via_data(problem, data, False, bool(verbose), opts), chain,
+                                           inverse)
+                    return compile_time
+                cache.chain, cache.inverse = chain, inverse
+            elif cache.b0 is None:
+                problem.solve(solver=solver, verbose=bool(verbose), **opts)
+                return problem.compilation_time
             data = {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
             compile_time = time.perf_counter() - t0
             problem.unpack_results(cache.chain.solve_via_data(problem, data, False, bool(verbose), opts),
@@ -329,27 +332,26 @@ class ConvexModel:
 
         return run
 
-    def _affine_rhs(self, problem, solver: str, opts: dict, key) -> _RhsCache:
-        """The cache of :meth:`_runner`: the data at ``load_factor`` 0 with ``b1 = b(1) - b(0)``,
-        or no data where anything but ``b`` depends on ``load_factor`` (a user's constraint may
+    def _affine_rhs(self, problem, solver: str, opts: dict, key, data: dict, chain) -> _RhsCache:
+        """The cache of :meth:`_runner` from the solver's ``data`` at the current load factor
+        ``v``: ``b0`` from the data at 0 and ``b1 = (b(v) - b0) / v``; no ``b0`` where the solver
+        takes QP data or anything but ``b`` depends on ``load_factor`` (a user's constraint may
         multiply a variable by it)."""
-        lf = self.load_factor
-        value = lf.value
-        try:
-            lf.value = 0.0
-            data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
-            lf.value = 1.0
-            one = problem.get_problem_data(solver, solver_opts=opts)[0]
-        finally:
-            lf.value = value
         if not isinstance(chain.solver, ConicSolver):  # a solver on both lists may get QP data instead
             return _RhsCache(key)
-        for k, v in data.items():
-            w = one[k]
-            changed = (v != w).nnz if sp.issparse(v) else isinstance(v, np.ndarray) and not np.array_equal(v, w)
+        lf = self.load_factor
+        v = float(lf.value)
+        try:
+            lf.value = 0.0
+            zero = problem.get_problem_data(solver, solver_opts=opts)[0]
+        finally:
+            lf.value = v
+        for k, a in data.items():
+            z = zero[k]
+            changed = (a != z).nnz if sp.issparse(a) else isinstance(a, np.ndarray) and not np.array_equal(a, z)
             if k != "b" and changed:
                 return _RhsCache(key)
-        return _RhsCache(key, data=data, chain=chain, inverse=inverse, b0=data["b"], b1=one["b"] - data["b"])
+        return _RhsCache(key, data=data, b0=zero["b"], b1=(data["b"] - zero["b"]) / v)
 
     def _require_solved(self) -> None:
         if self._solved is None:
