@@ -169,7 +169,7 @@ class DualModel(ConvexModel):
             blocks["friction_upper"] = (_selector(self._jxb[pairs], n_r), "<=", bound)
             blocks["friction_lower"] = (_selector(self._jxb[pairs], n_r, -1.0), "<=", bound)
         self._blocks = blocks
-        self._friction_pairs, self._stick_pairs = fric, stick
+        self._friction_pairs = fric  # pairs whose dissipation g w |slip| enters the duality gap
         cons = {}
         for name, (M, sense, bound) in blocks.items():
             rows = self._rows(M)
@@ -309,14 +309,9 @@ class DualModel(ConvexModel):
             fields["error"] = None
         fields["residuals"] = applied
         fields["duality_gap"] = applied.get("duality_gap", float("nan"))
-        # the model's own phases; meshing and assembly happened before it was built
-        build = float(self.info.get("compile_time") or 0.0)
-        solve = float(self.info.get("wall") or 0.0) - build
-        recover = time.perf_counter() - t0
-        timings = {"mesh": 0.0, "assemble": 0.0, "build": build, "solve": solve, "recover": recover,
-                   "error": 0.0, "total": build + solve + recover}
         sol = Solution(triangulation=self.triangulation, stress_space="p0", level=int(s.mesh.level),
-                       timings=timings, checks={"applied": dict(applied), "skipped": skipped}, **fields)
+                       timings=self._timings(time.perf_counter() - t0),
+                       checks={"applied": dict(applied), "skipped": skipped}, **fields)
         if check:
             tol = {**TOLERANCES, "user_constraints": USER_TOLERANCE}
             bad = {k: v for k, v in applied.items() if not v <= tol[k]}  # NaN fails too

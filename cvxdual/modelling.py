@@ -371,6 +371,14 @@ class ConvexModel:
                              "this model's handles (model.stress, model.contact_force, ...)")
         return np.asarray(expression.value, dtype=float)
 
+    def _timings(self, recover: float) -> dict:
+        """``Solution.timings`` of the last solve: the model's own phases (meshing and assembly
+        happened before the model was built, and are not timed here)."""
+        build = float(self.info.get("compile_time") or 0.0)
+        solve = float(self.info.get("wall") or 0.0) - build
+        return {"mesh": 0.0, "assemble": 0.0, "build": build, "solve": solve, "recover": recover, "error": 0.0,
+                "total": build + solve + recover}
+
     def _elastic(self) -> bool:
         """Whether the multipliers are the displacements of an elastic problem: the default
         objective and no added constraint (friction, adhesion and load_factor keep it)."""
