@@ -40,6 +40,7 @@ from .solution import (
     complementarity,
     duality_gap,
     evaluate,
+    failed_checks,
     load_scale,
     penetration,
 )
@@ -314,9 +315,8 @@ class DualModel(ConvexModel):
                        checks={"applied": dict(applied), "skipped": skipped}, **fields)
         if check:
             tol = {**TOLERANCES, "user_constraints": USER_TOLERANCE}
-            bad = {k: v for k, v in applied.items() if not v <= tol[k]}  # NaN fails too
-            if bad:
-                txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
+            txt = failed_checks(applied, tol)
+            if txt:
                 advice = ("try model.solve('CLARABEL') or tighter solver tolerances" if lf >= 0.1 else
                           f"at load_factor {lf:g} the model's scales (set by the unit load) are {1 / lf:.0g} times "
                           "the solution's: pass tighter tolerances (tol_gap_rel=1e-14, tol_feas=1e-16, "

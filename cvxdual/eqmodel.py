@@ -23,7 +23,7 @@ from .equilibrium import EquilibriumSpace, make_exact
 from .errors import AccuracyError, ModelError
 from .invariants import out_of_plane_factor
 from .modelling import USER_TOLERANCE, ConvexModel
-from .solution import EQ_TOLERANCES, Solution, edge_contact
+from .solution import EQ_TOLERANCES, Solution, edge_contact, failed_checks
 
 
 class EquilibriumModel(ConvexModel):
@@ -168,9 +168,8 @@ class EquilibriumModel(ConvexModel):
                        checks={"applied": applied, "skipped": skipped})
         if check:
             tol = {**EQ_TOLERANCES, "user_constraints": USER_TOLERANCE}
-            bad = {k: v for k, v in applied.items() if not v <= tol[k]}
-            if bad:
-                txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
+            txt = failed_checks(applied, tol)
+            if txt:
                 raise AccuracyError(f"the exact field fails the checks that apply to this model ({txt}); tighten the "
                                     "solver's tolerances, or model.solution(check=False) to inspect it")
         return sol

@@ -45,13 +45,16 @@ CVXPY_OPTIONS = {"gp", "qcp", "requires_grad", "enforce_dpp", "ignore_dpp", "can
 
 @dataclass
 class _RhsCache:
-    """A load_factor sweep's solver data (see :meth:`ConvexModel._runner`); ``b0`` None where
-    the right-hand side is not all that changes with the load factor."""
+    """A load_factor sweep's solver data (see :meth:`ConvexModel._runner`): those of the first
+    solve, at load factor ``value``; ``affine`` None until a re-solve has checked that only the
+    right-hand side changes with the load factor (then ``b0``, ``b1``), False where not."""
 
     key: tuple
-    data: dict | None = None
-    chain: object = None
-    inverse: object = None
+    data: dict
+    chain: object
+    inverse: object
+    value: float
+    affine: bool | None = None
     b0: np.ndarray | None = None
     b1: np.ndarray | None = None
 
@@ -292,13 +295,14 @@ class ConvexModel:
         """``run(opts)`` for :func:`solve_problem`. In a DPP problem whose ``load_factor`` enters
         the solver's right-hand side alone, the solver's data at any load factor differ in
         ``b = b0 + load_factor b1`` only (DPP problems are affine in their parameters). The first
-        solve therefore compiles once (CVXPY), applies ``load_factor = 0`` to CVXPY's cached
-        program for ``b0`` and checks that nothing else changed; every later solve that changes
-        only ``load_factor`` hands the solver the cached data with the new ``b``, skipping CVXPY's
-        recompile (the parameter applied to the whole canonical tensor, ``O(nnz)``). Anything
-        else (a change of the model or of another parameter, CVXPY's own keywords, a QP
-        solver, a non-DPP problem) goes through CVXPY. The cache is keyed on the user's
-        ``options``: the tolerances scaled to the load factor steer the solver, not its data."""
+        solve compiles (CVXPY) and keeps the solver's data; the first re-solve that changes only
+        ``load_factor`` applies ``load_factor = 0`` to CVXPY's cached program for ``b0`` and checks
+        that nothing else changed; from then on the solver gets the kept data with the new ``b``,
+        skipping CVXPY's recompile (the parameter applied to the whole canonical tensor,
+        ``O(nnz)``). A single solve does no more than CVXPY's own. Anything else (a change of the
+        model or of another parameter, CVXPY's own keywords, a QP solver, a non-DPP problem)
+        goes through CVXPY. The cache is keyed on the user's ``options``: the tolerances scaled to
+        the load factor steer the solver, not its data."""
         problem = self.problem
         lf = self.load_factor
         cacheable = (not self.limit_analysis and solver in CONIC_SOLVERS and not set(options) & CVXPY_OPTIONS
@@ -314,17 +318,13 @@ class ConvexModel:
             cache = self._rhs if self._rhs is not None and self._rhs.key == key else None
             if cache is None:
                 data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
-                cache = self._rhs = self._affine_rhs(problem, solver, opts, key, data, chain)
-                if cache.b0 is None:  # load_factor is not in b alone: these data, then CVXPY
-                    compile_time = time.perf_counter() - t0
-                    problem.unpack_results(chain.solve_via_data(problem, data, False, bool(verbose), opts), chain,
-                                           inverse)
-                    return compile_time
-                cache.chain, cache.inverse = chain, inverse
-            elif cache.b0 is None:
+                cache = self._rhs = _RhsCache(key, data, chain, inverse, float(lf.value))
+            elif cache.affine is None:
+                cache.affine = self._affine_rhs(problem, solver, opts, cache)
+            if cache.affine is False:  # load_factor is not in b alone: CVXPY from now on
                 problem.solve(solver=solver, verbose=bool(verbose), **opts)
                 return problem.compilation_time
-            data = {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
+            data = cache.data if cache.affine is None else {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
             compile_time = time.perf_counter() - t0
             problem.unpack_results(cache.chain.solve_via_data(problem, data, False, bool(verbose), opts),
                                    cache.chain, cache.inverse)
@@ -332,26 +332,25 @@ class ConvexModel:
 
         return run
 
-    def _affine_rhs(self, problem, solver: str, opts: dict, key, data: dict, chain) -> _RhsCache:
-        """The cache of :meth:`_runner` from the solver's ``data`` at the current load factor
-        ``v``: ``b0`` from the data at 0 and ``b1 = (b(v) - b0) / v``; no ``b0`` where the solver
-        takes QP data or anything but ``b`` depends on ``load_factor`` (a user's constraint may
-        multiply a variable by it)."""
-        if not isinstance(chain.solver, ConicSolver):  # a solver on both lists may get QP data instead
-            return _RhsCache(key)
-        lf = self.load_factor
-        v = float(lf.value)
+    def _affine_rhs(self, problem, solver: str, opts: dict, cache: _RhsCache) -> bool:
+        """Whether the kept data (at load factor ``cache.value``) and the data at 0 differ in
+        ``b`` alone; if so ``cache.b0``, ``cache.b1 = (b(value) - b0) / value`` are set. Not where
+        the solver takes QP data, or a user's constraint multiplies a variable by ``load_factor``."""
+        if not isinstance(cache.chain.solver, ConicSolver):  # a solver on both lists may get QP data instead
+            return False
+        v = float(self.load_factor.value)
         try:
-            lf.value = 0.0
+            self.load_factor.value = 0.0
             zero = problem.get_problem_data(solver, solver_opts=opts)[0]
         finally:
-            lf.value = v
-        for k, a in data.items():
+            self.load_factor.value = v
+        for k, a in cache.data.items():
             z = zero[k]
             changed = (a != z).nnz if sp.issparse(a) else isinstance(a, np.ndarray) and not np.array_equal(a, z)
             if k != "b" and changed:
-                return _RhsCache(key)
-        return _RhsCache(key, data=data, b0=zero["b"], b1=(data["b"] - zero["b"]) / v)
+                return False
+        cache.b0, cache.b1 = zero["b"], (cache.data["b"] - zero["b"]) / cache.value
+        return True
 
     def _require_solved(self) -> None:
         if self._solved is None:

@@ -68,10 +68,16 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
                                "stress_space='p0'")
         system = build_system(scene, triangulation, level)
         return EquilibriumModel(EquilibriumSpace.from_mesh(system.mesh), limit_analysis, system)
+    return _dual_model(build_system(scene, triangulation, level), triangulation, limit_analysis)
+
+
+def _dual_model(system: System, triangulation: str, limit_analysis: bool = False):
+    """The :class:`~cvxdual.dual.DualModel` of ``system`` with its scene's friction, if any."""
     from .dual import DualModel
-    model = DualModel(build_system(scene, triangulation, level), triangulation, limit_analysis)
-    if scene.friction is not None:
-        model.add_friction(scene.friction.g)
+    model = DualModel(system, triangulation, limit_analysis)
+    friction = system.mesh.scene.friction
+    if friction is not None:
+        model.add_friction(friction.g)
     return model
 
 
@@ -168,10 +174,7 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         info["warm_start_time"] = t_warm  # counted in "solve": it is part of the fast path's work
         t = system.stresses_from_displacement(u)
     else:
-        from .dual import DualModel
-        model = DualModel(system, triangulation)
-        if scene.friction is not None:
-            model.add_friction(scene.friction.g)
+        model = _dual_model(system, triangulation)
         t_built = time.perf_counter()
         info = model.solve(solver, **solver_options)
         # CVXPY canonicalises inside solve(); count that as building the problem

@@ -297,12 +297,15 @@ def tolerances(sol: Solution) -> dict:
     return EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
 
 
+def failed_checks(applied: dict, tol: dict) -> str:
+    """The residuals of ``applied`` above their tolerance in ``tol`` (NaN fails too), as text
+    for a message; empty if none."""
+    return ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in applied.items() if k in tol and not v <= tol[k])
+
+
 def check_solution(sol: Solution) -> None:
-    tol = tolerances(sol)
-    applied = sol.residuals if sol.checks is None else sol.checks["applied"]
-    bad = {k: v for k, v in applied.items() if k in tol and not v <= tol[k]}  # NaN fails too
-    if bad:
-        txt = ", ".join(f"{k} {v:.2e} > {tol[k]:.0e}" for k, v in bad.items())
+    txt = failed_checks(sol.residuals if sol.checks is None else sol.checks["applied"], tolerances(sol))
+    if txt:
         name = str(sol.solver.get("solver"))
         advice = ({"api": "try solver='fast', or a coarser mesh", "cli": "try --solver fast, or a coarser mesh"}
                   if name.upper() == "CLARABEL" else
