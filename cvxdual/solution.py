@@ -307,8 +307,13 @@ def check_solution(sol: Solution) -> None:
     txt = failed_checks(sol.residuals if sol.checks is None else sol.checks["applied"], tolerances(sol))
     if txt:
         name = str(sol.solver.get("solver"))
+        frictionless = sol.scene.friction is None  # the fast path is frictionless: not advised under friction
         advice = ({"api": "try solver='fast', or a coarser mesh", "cli": "try --solver fast, or a coarser mesh"}
+                  if name.upper() == "CLARABEL" and frictionless else
+                  {"api": "try a coarser mesh or tighter solver tolerances", "cli": "try a coarser mesh"}
                   if name.upper() == "CLARABEL" else
+                  {"api": "try solver='CLARABEL' (interior point)", "cli": "try --solver CLARABEL (interior point)"}
+                  if not frictionless else
                   {"api": "the problem is too ill-conditioned for its factorisation; use solver='CLARABEL'",
                    "cli": "the problem is too ill-conditioned for its factorisation; use --solver CLARABEL"}
                   if name == "fast" else

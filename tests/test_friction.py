@@ -247,3 +247,17 @@ def test_tresca_bound_stick_and_frictionless_limit(level):
     # equality rows are solved to ~1e-15; measured 1e-16 of the total force)
     _, free = solved("dissimilar", level)
     assert np.abs(free.contact["tangential_force"]).max() <= 1e-9 * free.contact["total_force"]
+
+
+def test_accuracy_advice_under_friction_never_names_the_fast_path():
+    """The fast path refuses friction, so a friction solve that fails its checks is not sent there."""
+    from dataclasses import replace
+
+    scene = cd.load_scene("hertz", overrides=[{"contact": {"friction": {"g": 358.5}}}])
+    sol = cd.solve(scene, level=1, check=False)
+    for name in ("CLARABEL", "SCS"):
+        bad = replace(sol, solver={**sol.solver, "solver": name},
+                      checks={"applied": {"equilibrium": 1.0}, "skipped": {}})
+        with pytest.raises(cd.AccuracyError) as info:
+            cd.solution.check_solution(bad)
+        assert "fast" not in str(info.value) and "fast" not in info.value.cli
