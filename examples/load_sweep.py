@@ -39,8 +39,8 @@ The load factor enters ``b`` alone, ``b = b0 + lf b1``, so :class:`cvxdual.DualM
 once at the first solve and keeps the solver's data, reads ``b0`` off CVXPY's cached program at
 ``lf = 0`` at the second (checking that nothing else depends on ``lf``) and from then on hands
 the solver the kept data with the new ``b`` (CVXPY's ``get_problem_data``, ``solve_via_data``,
-``unpack_results``). The ratio printed below is measured, not assumed. The solves dominate anyway: 0.3-0.9 s per level at level 3, 5-7 s at
-level 4, against milliseconds of compiling.
+``unpack_results``). The ratio printed below is measured, not assumed. The solves dominate
+anyway: 0.3-0.9 s per level at level 3, 5-7 s at level 4, against milliseconds of compiling.
 
 Run::
 
