@@ -31,6 +31,13 @@ TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5
 EQ_TOLERANCES = {"admissibility": 1e-9, "penetration": 1e-12}
 BOUND_KEYS = ("energy_upper", "energy_lower", "gap", "error_bound", "guaranteed", "reasons", "data_oscillation")
 
+# contact.csv and Solution.contact_table(), one row per pair: tangential_force is the x force of
+# the upper body on the lower one (0 without friction); slip the relative tangential
+# displacement u''_x - u'_x; stick 1 where an active pair sticks
+CONTACT_COLUMNS = ("x", "gap", "relative_displacement", "pressure", "active", "force", "tangential_force", "slip",
+                   "stick")
+FLAG_COLUMNS = ("active", "stick")  # booleans, written as 0/1
+
 ACTIVE_TOL = 1e-6  # an active pair's force exceeds this fraction of the largest (and its opening)
 FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
 
@@ -75,6 +82,25 @@ class Solution:
     @property
     def pieces(self):
         return self.system.pieces
+
+    def contact_columns(self) -> dict:
+        """The contact arrays of :data:`CONTACT_COLUMNS` by name, flags as integers. A missing
+        column is an error, never filled in: a made-up 0 would read as a computed result."""
+        c = self.contact
+        missing = [k for k in CONTACT_COLUMNS if k not in c]
+        if missing:
+            raise KeyError(f"the solution's contact data lacks {', '.join(missing)} (columns of contact.csv)")
+        return {k: np.asarray(c[k]).astype(int) if k in FLAG_COLUMNS else np.asarray(c[k]) for k in CONTACT_COLUMNS}
+
+    def contact_table(self):
+        """The contact pairs as a pandas DataFrame, one row per pair ordered by ``x``, with the
+        columns of ``contact.csv`` (:data:`CONTACT_COLUMNS`, in the scene's units): ``x``, ``gap``
+        (initial gap), ``relative_displacement`` (the faces' normal approach, which closes the gap:
+        ``gap - relative_displacement >= 0``), ``pressure``
+        (nodal force over tributary length), ``active`` (0/1), ``force`` (nodal contact force),
+        ``tangential_force``, ``slip``, ``stick``."""
+        import pandas as pd
+        return pd.DataFrame(self.contact_columns())
 
     def summary(self) -> dict:
         """The ``summary.json`` contract (README, "Outputs")."""

@@ -2,6 +2,7 @@
 
 import math
 from dataclasses import replace
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,6 +15,7 @@ from cvxdual.errors import SceneError
 from cvxdual.output import CONTACT_COLUMNS, contact_table, write_contact_csv
 from cvxdual.scene import Friction, convert_units
 from cvxdual.scenefile import load_scene, parse_assignment
+from cvxdual.solution import Solution
 
 BASE = 'base = "patch"\n'
 
@@ -160,13 +162,17 @@ def test_g_converts_like_a_stress():
 # --- contact.csv ----------------------------------------------------------------------------
 
 def fake_solution(n: int = 4, drop: str | None = None):
-    """A Solution-like object with only ``contact`` (what the contact writers read)."""
+    """A Solution-like object with only ``contact`` and the methods that read it (what the contact
+    writers use)."""
     x = np.linspace(0.0, 1.0, n)
     c = {"x": x, "gap": np.zeros(n), "relative_displacement": -1e-3 * x, "pressure": 100.0 + x,
          "active": np.array([True, True, False, True][:n]), "force": 2.5 * x, "tangential_force": 0.5 - x,
          "slip": np.array([0.0, 0.0, 1e-4, -2e-4][:n]), "stick": np.array([True, True, False, False][:n])}
     c.pop(drop, None)
-    return SimpleNamespace(contact=c)
+    sol = SimpleNamespace(contact=c)
+    sol.contact_columns = partial(Solution.contact_columns, sol)
+    sol.contact_table = partial(Solution.contact_table, sol)
+    return sol
 
 
 def test_contact_columns_end_with_the_friction_ones():
