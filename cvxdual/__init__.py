@@ -16,6 +16,7 @@ from .errors import (
                      OutputError,
                      SceneError,
                      SolverError,
+                     TimeLimitError,
                      TooLargeError,
                      UnbalancedLoadError,
                      UnknownSolverError,
@@ -42,10 +43,10 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
-    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "EquilibriumModel", "ExactSpec", "Friction",
-    "Material",
-    "MeshError", "MeshSpec", "ModelError", "NoAdmissibleStressError", "OutputError", "PrimalModel", "Scene",
-    "SceneError", "Solution", "SolverError", "System", "TooLargeError", "Traction", "UnbalancedLoadError",
-    "UnknownSolverError", "assemble", "build_mesh", "build_model", "build_system", "builtin_scenes", "discretize",
-    "exact_field", "load_scene", "recover", "solve",
+    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "EquilibriumModel", "ExactSpec",
+    "Friction", "Material", "MeshError", "MeshSpec", "ModelError", "NoAdmissibleStressError", "OutputError",
+    "PrimalModel", "Scene", "SceneError", "Solution", "SolverError", "System", "TimeLimitError",
+    "TooLargeError", "Traction", "UnbalancedLoadError", "UnknownSolverError", "assemble", "build_mesh",
+    "build_model", "build_system", "builtin_scenes", "discretize", "exact_field", "load_scene", "recover",
+    "solve",
 ]

@@ -6,14 +6,19 @@ Errors of cvxdual print one line (``cvxdual: error: ...``) and exit with status 
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import sys
-import time
+import threading
 import warnings
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
 
 import numpy as np
 
+from . import __version__
 from .errors import CvxdualError
+from .progress import check_time_limit, log, phase
 from .solvers import LARGE_QP
 from .validate import one_line
 
@@ -87,15 +92,68 @@ def _cmd_solve(args) -> int:
     scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])
     solver = None if args.solver is None else resolve_solver(args.solver)
     check_triangulation(args.triangulation)
+    time_limit = check_time_limit(args.time_limit)
     out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
         check_output_dir(out)  # fail before the work, and create nothing until there are results
-    sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
-                max_memory=args.max_memory)
-    t0 = time.perf_counter()
-    written = write_outputs(sol, out, plots=not args.no_plots) if out is not None else []
-    print(human_summary(sol, written, time.perf_counter() - t0))
+    with _solver_log_on_stderr(args.verbose), _hard_stop(time_limit):
+        sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
+                    max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
+    written, t_write = [], None
+    if out is not None:
+        with phase("write", start=f"outputs to {out}/" if not args.no_plots else None) as p:
+            written = write_outputs(sol, out, plots=not args.no_plots)
+            p.detail = f"{len(written)} files"
+        t_write = p.seconds
+    print(human_summary(sol, written, t_write))
     return 0
+
+
+HARD_STOP_GRACE = 1.0  # seconds past --time-limit for the run to stop itself before the process is ended
+
+
+@contextmanager
+def _hard_stop(time_limit: float | None):
+    """The time limit's last resort on the command line. ``solve`` stops itself at the limit
+    (:mod:`cvxdual.progress`), but not inside compiled code that holds on: SCS's setup on a
+    level-6 QP factorises for about 13 s. The solvers release the GIL, so a timer thread can
+    end the process then, with the one error line; nothing has been written at that point."""
+    if time_limit is None:
+        yield
+        return
+
+    def stop():
+        _fail(f"stopped at the time limit of {time_limit:g} s inside the solver, which cannot be interrupted "
+              "there; raise --time-limit, lower --level or use --solver fast")
+        sys.stderr.flush()
+        os._exit(1)
+
+    timer = threading.Timer(time_limit + HARD_STOP_GRACE, stop)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+
+
+@contextmanager
+def _solver_log_on_stderr(on: bool):
+    """With ``on``, the solvers' logs go to stderr, apart from the summary on stdout: ``sys.stdout``
+    (Clarabel prints through it) and file descriptor 1 (SCS and OSQP print from C)."""
+    if not on:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        with redirect_stdout(sys.stderr):
+            yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 STUDIES = ("convergence", "speed", "stability", "bounds")  # built-in specs: cvxdual/study/specs/NAME.*
@@ -109,6 +167,7 @@ def _cmd_study(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
                                 "(or Tresca) contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
+    p.add_argument("--version", action="version", version=f"cvxdual {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(func=_cmd_scenes)
     s = sub.add_parser("solve", help="solve a scene and write its outputs")
@@ -130,6 +189,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-memory", default=None, metavar="SIZE",
                    help="refuse runs estimated to need more memory, e.g. 16GB, or 'none' (default: the memory "
                    "available, or $CVXDUAL_MAX_MEMORY)")
+    s.add_argument("--time-limit", default=None, metavar="SECONDS",
+                   help="stop a run that takes longer (meshing to recovery; writing is not counted), with an error")
+    talk = s.add_mutually_exclusive_group()
+    talk.add_argument("--quiet", action="store_true", help="no progress lines on stderr (warnings and errors only)")
+    talk.add_argument("--verbose", action="store_true", help="also the solver's own log and the fast path's "
+                      "iterations, on stderr")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
@@ -142,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, _progress(args):
         warnings.simplefilter("always")
         try:
             status = args.func(args)
@@ -159,6 +224,26 @@ def main(argv=None) -> int:
     for text in dict.fromkeys(one_line(w.message, MAX_MESSAGE) for w in caught):
         print(f"cvxdual: warning: {text}", file=sys.stderr)
     return status
+
+
+@contextmanager
+def _progress(args):
+    """Progress lines (the logger ``cvxdual``, :mod:`cvxdual.progress`) on stderr while ``main`` runs:
+    INFO, DEBUG with ``--verbose``, none with ``--quiet``."""
+    if getattr(args, "quiet", False) or args.command != "solve":
+        yield
+        return
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("cvxdual: %(message)s"))
+    level = logging.DEBUG if args.verbose else logging.INFO
+    saved = log.level
+    log.addHandler(handler)
+    log.setLevel(level)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(saved)
 
 
 def _fail(message: str) -> int:

@@ -36,6 +36,10 @@ class SolverError(CvxdualError):
     """The QP solver did not return an optimal solution (infeasible, inaccurate, max iterations)."""
 
 
+class TimeLimitError(CvxdualError):
+    """The run (or its solver) reached its time limit before it finished."""
+
+
 class UnknownSolverError(CvxdualError, ValueError):
     """The requested solver is not known or not installed."""
 

@@ -20,6 +20,7 @@ coarser level) make the changes few.
 from __future__ import annotations
 
 import functools
+import logging
 import time
 
 import numpy as np
@@ -29,6 +30,8 @@ from .assembly import System
 from .errors import SolverError
 from .factor import SPDFactor, backend, backends
 from .sparse import assemble_lower
+
+log = logging.getLogger(__name__)
 
 MAX_ITER = 60
 MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactorising
@@ -244,6 +247,7 @@ class ActiveSet:
             # between equivalent sets at a degenerate contact edge)
             new = self.cover(np.where(A, force > -1e-12 * fscale, opening < -1e-12 * dscale), opening)
             self.stats["iterations"] = it
+            log.debug("fast path: iteration %d, %d active pairs, %d change", it, int(A.sum()), int((new != A).sum()))
             if np.array_equal(new, A):
                 return r, force, A
             key = new.tobytes()

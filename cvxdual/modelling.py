@@ -21,7 +21,7 @@ from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
 from cvxpy.reductions.solvers.defines import CONIC_SOLVERS
 
 from .errors import ModelError
-from .solvers import DEFAULT_SOLVER, resolve_solver, solve_problem
+from .solvers import DEFAULT_SOLVER, TIME_LIMIT_OPTION, resolve_solver, solve_problem
 
 # a user constraint may be violated by this much relative to the size of its terms: the
 # interior-point solvers stop at 1e-8 relative feasibility, so 1e-6 leaves a margin of 100
@@ -275,7 +275,7 @@ class ConvexModel:
                                    f"({what}); bound it with constraints",
                       "unbounded_inaccurate": f"the objective looks unbounded with your changes ({what}); "
                                               "bound it with constraints"}
-        run = self._runner(solver, verbose, options)
+        run = self._runner(solver, verbose, options, time_limit)
         self.info = solve_problem(self.problem, solver, self.what, advice, time_limit, verbose, run=run,
                                   accept=self._accept, defaults=self._scaled_tolerances(solver, options), **options)
         self._solved = key
@@ -291,7 +291,7 @@ class ConvexModel:
         f = max(float(lf), SMALLEST_SCALED)
         return {k: CLARABEL_DEFAULTS[k] * f ** SCALED_TOLERANCES[k] for k in SCALED_TOLERANCES}
 
-    def _runner(self, solver: str, verbose: bool, options: dict):
+    def _runner(self, solver: str, verbose: bool, options: dict, time_limit: float | None = None):
         """``run(opts)`` for :func:`solve_problem`. In a DPP problem whose ``load_factor`` enters
         the solver's right-hand side alone, the solver's data at any load factor differ in
         ``b = b0 + load_factor b1`` only (DPP problems are affine in their parameters). The first
@@ -302,7 +302,8 @@ class ConvexModel:
         ``O(nnz)``). A single solve does no more than CVXPY's own. Anything else (a change of the
         model or of another parameter, CVXPY's own keywords, a QP solver, a non-DPP problem)
         goes through CVXPY. The cache is keyed on the user's ``options``: the tolerances scaled to
-        the load factor steer the solver, not its data."""
+        the load factor steer the solver, not its data. A ``time_limit`` covers the compile too:
+        the solver is given what the compile left of it."""
         problem = self.problem
         lf = self.load_factor
         cacheable = (not self.limit_analysis and solver in CONIC_SOLVERS and not set(options) & CVXPY_OPTIONS
@@ -326,6 +327,9 @@ class ConvexModel:
                 return problem.compilation_time
             data = cache.data if cache.affine is None else {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
             compile_time = time.perf_counter() - t0
+            if time_limit is not None:
+                name = TIME_LIMIT_OPTION[solver]
+                opts = {**opts, name: max(opts[name] - compile_time, 1e-3)}
             problem.unpack_results(cache.chain.solve_via_data(problem, data, False, bool(verbose), opts),
                                    cache.chain, cache.inverse)
             return compile_time

@@ -9,8 +9,10 @@ pipeline, transferred to level ``L``.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +21,15 @@ from .assembly import System, assemble
 from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
 from .fast import solve_fast, transfer_active  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
 from .mesh import check_level, mesh_size
+from .progress import Deadline, phase
 from .scene import Scene
 from .sizing import check_size
 from .solution import Solution, check_solution, evaluate
-from .solvers import DEFAULT_SOLVER, FAST, default_solver, resolve_solver
+from .solvers import DEFAULT_SOLVER, FAST, TIME_LIMIT_OPTION, default_solver, resolve_solver
 from .triangulation import check_triangulation, discretize
 from .validate import one_line, short
+
+log = logging.getLogger(__name__)
 
 STRESS_SPACES = ("p0", "eq")  # the paper's piecewise-constant stresses; equilibrium (docs/equilibrium.md)
 
@@ -83,7 +88,8 @@ def _dual_model(system: System, triangulation: str, limit_analysis: bool = False
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
           check: bool = True, warm_start: bool = True, stress_space: str = "p0", bounds: bool = False,
-          max_memory=None, fallback: bool = True, **solver_options) -> Solution:
+          max_memory=None, fallback: bool = True, time_limit: float | None = None, verbose: bool = False,
+          **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.fast`
@@ -101,7 +107,12 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     The run's memory is estimated first and refused above ``max_memory`` (bytes or ``"16GB"``;
     default: the memory available, see :mod:`cvxdual.sizing`) with
     :class:`~cvxdual.errors.TooLargeError`.
+    ``time_limit`` (seconds) bounds the whole run (:mod:`cvxdual.progress`): past it the run
+    stops with :class:`~cvxdual.errors.TimeLimitError`. ``verbose`` prints the CVXPY solver's
+    own log. Progress is logged to the logger ``"cvxdual"`` (INFO; the fast path's iterations
+    at DEBUG).
     """
+    deadline = Deadline(time_limit)
     scene = as_scene(scene)
     chosen = solver is None and not solver_options  # options name their solver: Clarabel's, as always
     triangulation = check_triangulation(triangulation)
@@ -125,40 +136,50 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
         raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
                           "drop them or choose a CVXPY solver such as CLARABEL")
     check_size(scene, level, solver == FAST, stress_space, bounds, max_memory)
-    run = _solve_eq if stress_space == "eq" else _solve_p0
+    attempt = partial(_solve_eq if stress_space == "eq" else _solve_p0, scene, triangulation, level, check=check,
+                      warm_start=warm_start, bounds=bounds, deadline=deadline, verbose=verbose)
     try:
-        try:
-            return run(scene, triangulation, level, solver, check, warm_start, bounds, **solver_options)
-        except (SolverError, AccuracyError) as e:
-            if not fallback or not (solver == FAST or (chosen and solver != DEFAULT_SOLVER)):
-                raise
-            # the fast path (or the size's default) failed where Clarabel may not: hand over, say so
-            reason = one_line(e, 300)
-            name = "the fast path" if solver == FAST else solver
+        with deadline.enforced():
             try:
-                check_size(scene, level, False, stress_space, bounds, max_memory)
-                sol = run(scene, triangulation, level, DEFAULT_SOLVER, check, warm_start, bounds)
-            except CvxdualError as e2:  # both paths failed: say so, with both reasons
-                both = f"{name} failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
-                raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
-            return replace(sol, solver={**sol.solver, "fallback": f"{name} failed ({reason}); "
-                                        f"solved by {DEFAULT_SOLVER}"})
+                return attempt(solver, **solver_options)
+            except (SolverError, AccuracyError) as e:
+                if not fallback or not (solver == FAST or (chosen and solver != DEFAULT_SOLVER)):
+                    raise
+                deadline.check()  # no time left for another solver
+                # the fast path (or the size's default) failed where Clarabel may not: hand over, say so
+                reason = one_line(e, 300)
+                name = "the fast path" if solver == FAST else solver
+                try:
+                    check_size(scene, level, False, stress_space, bounds, max_memory)
+                    log.info("%s failed (%s); solving with %s", name, reason, DEFAULT_SOLVER)
+                    sol = attempt(DEFAULT_SOLVER)
+                except CvxdualError as e2:  # both paths failed: say so, with both reasons
+                    both = f"{name} failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
+                    raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
+                return replace(sol, solver={**sol.solver, "fallback": f"{name} failed ({reason}); "
+                                            f"solved by {DEFAULT_SOLVER}"})
     except MemoryError:
         what = f"ran out of memory solving {short(scene.name, 40)} at level {level}"
         raise TooLargeError(f"{what}; lower the level or free memory",
                             cli=f"{what}; lower --level or free memory") from None
 
 
-def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool, warm_start: bool,
-              bounds: bool, **solver_options) -> Solution:
+def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True, warm_start: bool = True,
+              bounds: bool = False, deadline: Deadline | None = None, verbose: bool = False,
+              **solver_options) -> Solution:
     """The paper's P0 run (see :func:`solve`)."""
+    deadline = deadline or Deadline()
     if bounds:
         from .equilibrium import check_flat
         check_flat(scene)
     t0 = time.perf_counter()
-    mesh, pieces, ties = discretize(scene, triangulation, level)
+    with phase("mesh", deadline) as p:
+        mesh, pieces, ties = discretize(scene, triangulation, level)
+        p.detail = f"{triangulation}, level {level}: {len(mesh.points)} nodes, {len(pieces.kind)} pieces"
     t1 = time.perf_counter()
-    system = assemble(mesh, pieces, ties)
+    with phase("assemble", deadline) as p:
+        system = assemble(mesh, pieces, ties)
+        p.detail = f"{3 * system.n_pieces} stress unknowns, {system.n_dofs} dofs, {len(system.jb)} contact pairs"
     t2 = time.perf_counter()
     build = 0.0
     if not np.any(system.f) and np.all(system.eps >= 0):
@@ -168,20 +189,31 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         t = np.zeros((system.n_pieces, 3))
         info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
     elif solver == FAST:
-        active = warm_start_active(scene, triangulation, level, mesh.pair_x) if warm_start else None
-        t_warm = time.perf_counter() - t2
-        u, info = solve_fast(system, active)
-        info["warm_start_time"] = t_warm  # counted in "solve": it is part of the fast path's work
-        t = system.stresses_from_displacement(u)
+        with phase("solve", deadline, start=f"fast path on {system.n_r} displacement unknowns") as p:
+            active = warm_start_active(scene, triangulation, level, mesh.pair_x) if warm_start else None
+            t_warm = time.perf_counter() - t2
+            u, info = solve_fast(system, active)
+            info["warm_start_time"] = t_warm  # counted in "solve": it is part of the fast path's work
+            t = system.stresses_from_displacement(u)
+            p.detail = (f"fast path: active-set iterations {info['iterations']}, factorisations "
+                        f"{info['factorizations']} ({info['backend']}), of which the warm start {t_warm:.2f} s")
     else:
-        model = _dual_model(system, triangulation)
+        with phase("build", deadline) as p:
+            model = _dual_model(system, triangulation)
+            p.detail = "the CVXPY model; CVXPY compiles it at the start of the solve"
         t_built = time.perf_counter()
-        info = model.solve(solver, **solver_options)
+        limit = deadline.remaining() if solver in TIME_LIMIT_OPTION else None  # others: the alarm alone
+        with phase("solve", deadline, start=f"{solver} on {3 * system.n_pieces} stress unknowns") as p:
+            info = model.solve(solver, time_limit=limit, verbose=verbose, **solver_options)
+            p.detail = (f"{solver}: {info['status']} in {info['iterations']} iterations; of the time, CVXPY's "
+                        f"compile {float(info.get('compile_time') or 0.0):.2f} s")
         # CVXPY canonicalises inside solve(); count that as building the problem
         build = t_built - t2 + float(info.get("compile_time") or 0.0)
         if scene.friction is not None:  # the model's own rows and checks (docs/reformulate.md)
             t3 = time.perf_counter()
-            sol = model.solution(check=False)
+            with phase("recover", deadline) as p:
+                sol = model.solution(check=False)
+                p.detail = "displacements from the multipliers, checks"
             t4 = time.perf_counter()
             sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t3 - t2 - build,
                                         "recover": t4 - t3, "error": 0.0, "total": t4 - t0})
@@ -190,15 +222,18 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
             return sol
         t, u = model.stresses(), model.displacements()
     t4 = time.perf_counter()
-    fields = evaluate(system, t, u, info)
-    if bounds:
-        from .equilibrium import EquilibriumSpace
-        space = EquilibriumSpace.from_mesh(mesh)
-        # the equilibrium stresses by the fast route whatever the P0 solver (the same QP, exact)
-        sigma, _ = solve_eq(space, FAST, (mesh.pair_x, fields["contact"]["active"]))
-        from .bounds import certified_bounds
-        fields["bounds"] = certified_bounds(space, sigma, fields["displacement"])
-        fields["space"] = space
+    with phase("recover", deadline) as p:
+        fields = evaluate(system, t, u, info)
+        p.detail = "residuals" + (", error against the exact field" if fields["error"] is not None else "")
+        if bounds:
+            from .equilibrium import EquilibriumSpace
+            space = EquilibriumSpace.from_mesh(mesh)
+            # the equilibrium stresses by the fast route whatever the P0 solver (the same QP, exact)
+            sigma, _ = solve_eq(space, FAST, (mesh.pair_x, fields["contact"]["active"]))
+            from .bounds import certified_bounds
+            fields["bounds"] = certified_bounds(space, sigma, fields["displacement"])
+            fields["space"] = space
+            p.detail += ", certified bounds"
     t5 = time.perf_counter()
     timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
                "recover": t5 - t4, "error": fields.pop("timings")["error"], "total": t5 - t0}
@@ -214,6 +249,7 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
     same way), transferred to the abscissae ``pair_x``; ``None`` below level 2."""
     if level < 2:
         return None
+    log.debug("warm start: the active set of level %d", level - 2)
     system = build_system(scene, triangulation, level - 2)
     if not np.any(system.f) and np.all(system.eps >= 0):
         return None
@@ -263,19 +299,23 @@ def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -
     return model.stresses(), info
 
 
-def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool, warm_start: bool,
-              bounds: bool, **solver_options) -> Solution:
+def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True, warm_start: bool = True,
+              bounds: bool = True, deadline: Deadline | None = None, verbose: bool = False,
+              **solver_options) -> Solution:
     """The "eq" run: the P1 displacement from the fast path, the equilibrium stresses on the
     same mesh, the certified bounds between them (always: ``bounds`` is implied) and the errors
     against an exact field. (Flat faces: both triangulations are the same mesh.)"""
-    from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
     from .equilibrium import EquilibriumSpace, check_flat
-    from .exact import exact_field
     check_flat(scene)
+    deadline = deadline or Deadline()
     t0 = time.perf_counter()
-    system = build_system(scene, triangulation, level)
+    with phase("mesh", deadline) as p:
+        system = build_system(scene, triangulation, level)
+        p.detail = f"level {level}: {len(system.mesh.points)} nodes, {system.n_dofs} dofs (the P1 displacement's)"
     t1 = time.perf_counter()
-    space = EquilibriumSpace.from_mesh(system.mesh)
+    with phase("assemble", deadline) as p:
+        space = EquilibriumSpace.from_mesh(system.mesh)
+        p.detail = f"equilibrium space: {space.n_y} stress unknowns on {3 * space.n_tri} sub-triangles"
     t2 = time.perf_counter()
     if not np.any(system.f) and np.all(system.eps >= 0):
         # nothing acts: zero stresses and displacements are the solution (see solve())
@@ -283,19 +323,39 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
         sigma = np.zeros((3 * space.n_tri, 3, 3))
         info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
     else:
-        try:
-            start = warm_start_active(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
-            u, p0_info = solve_fast(system, start)
-            pairs = (system.mesh.pair_x, p0_info["active"])
-        except SolverError:
-            if solver == FAST:
-                raise
-            from .dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
-            model = DualModel(system)
-            model.solve(solver)
-            u, pairs = model.displacements(), None
-        sigma, info = solve_eq(space, solver, pairs, **solver_options)
+        with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({solver})") as p:
+            try:
+                start = warm_start_active(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
+                u, p0_info = solve_fast(system, start)
+                pairs = (system.mesh.pair_x, p0_info["active"])
+            except SolverError:
+                if solver == FAST:
+                    raise
+                from .dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
+                model = DualModel(system)
+                model.solve(solver, time_limit=deadline.remaining() if solver in TIME_LIMIT_OPTION else None)
+                u, pairs = model.displacements(), None
+            if solver != FAST:
+                solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
+                                  "verbose": verbose, **solver_options}
+            sigma, info = solve_eq(space, solver, pairs, **solver_options)
+            p.detail = f"{info.get('solver')}: {info.get('status')} in {info.get('iterations')} iterations"
     t3 = time.perf_counter()
+    with phase("recover", deadline) as p:
+        times = {"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2}
+        sol = _eq_solution(scene, triangulation, level, system, space, sigma, u, info, times)
+        p.detail = "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
+    if check:
+        check_solution(sol)
+    return sol
+
+
+def _eq_solution(scene, triangulation, level, system, space, sigma, u, info, times: dict) -> Solution:
+    """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma`` and ``u``; ``times``
+    of the phases before (the recovery's and the total are added)."""
+    t3 = time.perf_counter()
+    from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
+    from .exact import exact_field
     blocks = constraint_blocks(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
     v = b["displacement"]
@@ -317,13 +377,9 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
     t4 = time.perf_counter()
     t_err = t4 - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
-    sol = Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
+    return Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
                    stress=sigma, displacement=v, solver=info,
-                   timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2,
-                            "recover": t4 - t3, "error": t_err, "total": t4 - t0},
+                   timings={**times, "recover": t4 - t3, "error": t_err, "total": sum(times.values()) + t4 - t3},
                    objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res,
                    contact=eq_contact(space, system, sigma, v, blocks),
                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)
-    if check:
-        check_solution(sol)
-    return sol

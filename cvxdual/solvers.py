@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from .errors import SolverError, UnknownSolverError
+from .errors import SolverError, TimeLimitError, UnknownSolverError
 from .validate import one_line
 
 DEFAULT_SOLVER = "CLARABEL"  # the reference, and where every other path hands over
@@ -120,7 +120,7 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
         ran = getattr(problem.solver_stats, "solve_time", None) or wall  # the solver's own clock, if it reports one
         if time_limit is not None and ran >= 0.99 * time_limit and status in ("user_limit", "optimal_inaccurate"):
             # SCS reports a time-out as 'optimal_inaccurate'
-            raise SolverError(f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s "
+            raise TimeLimitError(f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s "
                               f"(status '{status}'); raise time_limit or try a coarser mesh")
         text = (advice or {}).get(status) or _ADVICE.get(status, "try another solver")
         raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}")

@@ -55,3 +55,16 @@ def load_example(name: str):
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+PROGRESS = ("mesh", "assemble", "build", "solve", "recover", "write")  # the phases of cvxdual.progress
+
+
+def without_progress(err: str) -> list[str]:
+    """The lines of a CLI run's stderr other than its progress lines (``cvxdual: PHASE: ...``),
+    after checking that the progress lines all come first: what a failed run must reduce to is
+    one error line, after whatever progress it made."""
+    lines = err.strip().splitlines()
+    progress = [any(line.startswith(f"cvxdual: {p}: ") for p in PROGRESS) for line in lines]
+    assert progress == sorted(progress, reverse=True), err  # no progress line after another line
+    return [line for line, p in zip(lines, progress, strict=True) if not p]

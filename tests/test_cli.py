@@ -6,6 +6,7 @@ import meshio
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import without_progress
 
 from cvxdual.cli import main
 from cvxdual.scenefile import builtin_names
@@ -42,9 +43,13 @@ def test_solve_writes_the_output_contract(tmp_path, capsys):
     assert m.point_data["displacement"].shape == (len(m.points), 3)
     tri = [b for b in m.cells if b.type == "triangle"]
     assert sum(len(b.data) for b in tri) == s["n_pieces"]
-    stress = np.concatenate(m.cell_data["stress"])
+    bodies = [i for i, b in enumerate(m.cells) if b.type != "line"]  # the line cells are the contact face
+    stress = np.concatenate([m.cell_data["stress"][i] for i in bodies])
     assert stress.shape == (s["n_pieces"], 3)
-    assert np.all(np.concatenate(m.cell_data["piece_kind"]) == 0)
+    assert np.all(np.concatenate([m.cell_data["piece_kind"][i] for i in bodies]) == 0)
+    lines = [i for i, b in enumerate(m.cells) if b.type == "line"]
+    assert len(lines) == 1 and len(m.cells[lines[0]].data) == s["n_contact_pairs"]
+    np.testing.assert_allclose(m.cell_data["pressure"][lines[0]], c["pressure"], rtol=1e-11)  # csv: 12 digits
     for png in ("stress.png", "deformed.png", "pressure.png"):
         assert (out / png).stat().st_size > 1000
     assert not list(out.glob(".*"))  # no temporary files left behind
@@ -77,8 +82,9 @@ def test_old_outputs_kept_when_writing_fails(tmp_path, monkeypatch, capsys, erro
 
     monkeypatch.setattr(meshio, "write", boom)
     assert main(["solve", "--scene", "patch", "--level", "1", "--out", str(out), "--no-plots"]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("cvxdual: error: cannot write outputs") and len(err.strip().splitlines()) == 1
+    err = without_progress(capsys.readouterr().err)
+    assert len(err) == 1 and err[0].startswith("cvxdual: error: cannot write outputs")
+    err = err[0]
     assert "nothing was changed in" in err
     # the whole previous set is intact (summary.json is written before the VTU): no mix of runs, no temporaries
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
@@ -105,9 +111,10 @@ BAD = [
 def test_bad_input_one_line_error_nothing_written(tmp_path, capsys, args, words):
     out = tmp_path / "out"
     rc = main(["solve", "--level", "0", *args, "--out", str(out)])
-    err = capsys.readouterr().err
+    err = without_progress(capsys.readouterr().err)
     assert rc == 1
-    assert err.startswith("cvxdual: error:") and len(err.strip().splitlines()) == 1
+    assert len(err) == 1 and err[0].startswith("cvxdual: error:")
+    err = err[0]
     assert words.lower() in err.lower()
     assert not out.exists()
 
@@ -151,8 +158,9 @@ GEOMETRY_BAD = [
 def test_bad_geometry_one_line_error_nothing_written(tmp_path, capsys, args, words):
     out = tmp_path / "out"
     assert main(["solve", "--level", "0", *args, "--out", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert err.startswith("cvxdual: error:") and len(err.strip().splitlines()) == 1
+    err = without_progress(capsys.readouterr().err)
+    assert len(err) == 1 and err[0].startswith("cvxdual: error:")
+    err = err[0]
     assert words in err
     assert not out.exists()
 

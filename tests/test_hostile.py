@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import without_progress
 
 import cvxdual as cd
 from cvxdual.cli import main
@@ -28,7 +29,7 @@ def run_cli(tmp_path, monkeypatch, capsys, argv, files=None):
         (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
     before = listing(tmp_path)
     rc = main(argv)
-    err = capsys.readouterr().err.strip().splitlines()
+    err = without_progress(capsys.readouterr().err)
     return rc, err, listing(tmp_path) - before
 
 

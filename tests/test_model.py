@@ -109,7 +109,7 @@ def test_infeasible_user_constraint_is_named(model):
 
 def test_time_limit_and_options(model):
     """Trap: SCS ran 504 s, silent, with no time limit. The limit goes to the solver."""
-    with pytest.raises(cd.SolverError, match="time limit"):
+    with pytest.raises(cd.TimeLimitError, match="time limit"):
         model.solve("CLARABEL", time_limit=1e-6)  # stops at its first check of the clock
     with pytest.raises(cd.SolverError, match="no time limit"):
         model.solve("CVXOPT", time_limit=10)  # a main dependency; it has no time limit
