@@ -6,20 +6,23 @@ Names from the paper are used where they help a reader holding it: ``lam`` (stre
 ``K0h`` (the cone of admissible test displacements), ``S_h`` (piecewise-constant stresses).
 """
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
+
 from .assembly import System, assemble
 from .errors import (
-                     AccuracyError,
-                     CvxdualError,
-                     MeshError,
-                     ModelError,
-                     NoAdmissibleStressError,
-                     OutputError,
-                     SceneError,
-                     SolverError,
-                     TimeLimitError,
-                     TooLargeError,
-                     UnbalancedLoadError,
-                     UnknownSolverError,
+    AccuracyError,
+    CvxdualError,
+    MeshError,
+    ModelError,
+    NoAdmissibleStressError,
+    OutputError,
+    SceneError,
+    SolverError,
+    TimeLimitError,
+    TooLargeError,
+    UnbalancedLoadError,
+    UnknownSolverError,
 )
 from .exact import exact_field
 from .materials import Material
@@ -30,7 +33,10 @@ from .scenefile import builtin_scenes, load_scene
 from .solution import Solution
 from .triangulation import discretize
 
-__version__ = "0.1.0"
+try:  # the installed distribution's version: pyproject.toml is its one source
+    __version__ = _version("cvxdual")
+except PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "unknown (not installed)"
 
 # the CVXPY models load CVXPY (0.3 s): on first use, so that the fast path never pays for it
 _LAZY = {"DualModel": ".dual", "EquilibriumModel": ".eqmodel", "PrimalModel": ".primal"}

@@ -12,11 +12,11 @@ import sys
 import threading
 import warnings
 from contextlib import contextmanager, redirect_stdout
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
 
-from . import __version__
 from .errors import CvxdualError
 from .progress import check_time_limit, log, phase
 from .solvers import LARGE_QP
@@ -167,7 +167,7 @@ def _cmd_study(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
                                 "(or Tresca) contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
-    p.add_argument("--version", action="version", version=f"cvxdual {__version__}")
+    p.add_argument("--version", action="version", version=f"cvxdual {version('cvxdual')}")
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(func=_cmd_scenes)
     s = sub.add_parser("solve", help="solve a scene and write its outputs")
