@@ -1,8 +1,50 @@
-"""Shared fixtures: a local Dask cluster configured as the study runner configures its own."""
+"""Shared fixtures: a local Dask cluster configured as the study runner configures its own.
+
+The tests leave no files in the repository's working tree: outputs go to ``tmp_path``,
+Hypothesis keeps no example database, pytest no cache (``-p no:cacheprovider`` in
+pyproject.toml), and the session fails if anything else appeared (``git status``).
+"""
 
 import contextlib
+import subprocess
+from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+ROOT = Path(__file__).resolve().parents[1]
+settings.register_profile("cvxdual", database=None)  # no .hypothesis/ in the working tree
+settings.load_profile("cvxdual")
+LEFT_ALONE = ("__pycache__", ".venv")  # Python's bytecode cache; the environment the tests run in
+_BEFORE = pytest.StashKey[set | None]()
+
+
+def _tree_entries() -> set[str] | None:
+    """Untracked and ignored entries of the working tree (``None`` outside a git checkout)."""
+    try:
+        p = subprocess.run(["git", "status", "--porcelain", "--ignored", "--untracked-files=all"], cwd=ROOT,
+                           capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if p.returncode:
+        return None
+    return {line[3:] for line in p.stdout.splitlines() if line[:2] in ("??", "!!")
+            and not any(part in LEFT_ALONE for part in Path(line[3:]).parts)}
+
+
+def pytest_sessionstart(session):
+    session.config.stash[_BEFORE] = _tree_entries()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    before = session.config.stash.get(_BEFORE, None)
+    after = _tree_entries() if before is not None else None
+    if after is not None and after - before:
+        new = sorted(after - before)
+        session.config.get_terminal_writer().line(
+            f"the tests left files in the working tree: {', '.join(new[:10])}", red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
 
 
 @contextlib.contextmanager
