@@ -1,20 +1,21 @@
 """Shared fixtures: a local Dask cluster configured as the study runner configures its own.
 
 The tests leave no files in the repository's working tree: outputs go to ``tmp_path``,
-Hypothesis keeps no example database, pytest no cache (``-p no:cacheprovider`` in
+Hypothesis keeps its files in a temporary directory, pytest no cache (``-p no:cacheprovider`` in
 pyproject.toml), and the session fails if anything else appeared (``git status``).
 """
 
 import contextlib
 import subprocess
+import tempfile
 from pathlib import Path
 
 import pytest
-from hypothesis import settings
+from hypothesis.configuration import set_hypothesis_home_dir
 
 ROOT = Path(__file__).resolve().parents[1]
-settings.register_profile("cvxdual", database=None)  # no .hypothesis/ in the working tree
-settings.load_profile("cvxdual")
+# Hypothesis keeps its example database and constants under .hypothesis/ of the working directory
+set_hypothesis_home_dir(tempfile.mkdtemp(prefix="cvxdual-tests-hypothesis-"))
 LEFT_ALONE = ("__pycache__", ".venv")  # Python's bytecode cache; the environment the tests run in
 _BEFORE = pytest.StashKey[set | None]()
 
