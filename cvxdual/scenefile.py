@@ -1,9 +1,10 @@
 """Scenes from TOML files, and the built-in scenes.
 
 Every built-in scene is a TOML file in ``cvxdual/data``. A user file may start from one with
-``base = "hertz"`` and override any value (tables are merged key by key), and the CLI's
-``--set mesh.grading=4`` does the same for single values. Keys are checked strictly: an
-unknown key is an error that names it. The format is documented in the README.
+``base = "hertz"``, or from another file with ``base = "other.toml"`` (relative to the directory
+of the file holding the ``base`` line), and override any value (tables are merged key by key);
+the CLI's ``--set mesh.grading=4`` does the same for single values. Keys are checked strictly:
+an unknown key is an error that names it. The format is documented in docs/scenes.md.
 """
 
 from __future__ import annotations
@@ -118,31 +119,95 @@ def _check_depth(data, what: str) -> None:
     raise SceneError(f"{what} is nested more than {MAX_DEPTH} levels deep; a scene has a few levels of tables")
 
 
+def is_path(source) -> bool:
+    """Whether a scene reference names a file (``x.toml``, ``dir/x``) rather than a built-in scene."""
+    text_ = str(source)
+    return text_.endswith(".toml") or bool(Path(text_).suffix) or "/" in text_ or "\\" in text_
+
+
+def _path_text(path: Path, limit: int = 100) -> str:
+    """``repr`` of a path for a message, cut from the left: the file's name is the informative end."""
+    text_ = repr(str(path))
+    return text_ if len(text_) <= limit else "'..." + text_[len(text_) - limit + 4:]
+
+
+def _read_file(path: Path, where: str) -> dict:
+    """The raw dict of scene file ``path`` (``where`` names it in messages)."""
+    if not path.is_file():
+        raise SceneError(f"{where} does not exist")
+    try:
+        return _toml(path.read_text(encoding="utf-8"), where)
+    except UnicodeDecodeError:
+        raise SceneError(f"{where} is not UTF-8 text; save it as UTF-8 TOML") from None
+    except OSError as e:
+        raise SceneError(f"cannot read {where} ({e.strerror or e}); check its permissions") from None
+
+
+def _base_data(ref, holder: Path | None, holder_name: str) -> tuple[dict, Path | None, str]:
+    """The raw dict named by ``base = ref`` in the scene ``holder_name`` (its file ``holder``, or
+    ``None`` for a built-in scene or a dict): a built-in name, or a path relative to the directory
+    of ``holder``. Returns the data, its file (``None`` for a built-in) and its name for messages."""
+    if not isinstance(ref, str) or not ref:
+        raise SceneError(f"{holder_name}: base must be a built-in scene name ({', '.join(builtin_names())}) or the "
+                         f"path of a .toml file, got {short(ref)}")
+    if not is_path(ref):
+        if ref not in builtin_names():
+            raise SceneError(f"{holder_name}: base {short(ref)} is not a built-in scene ({', '.join(builtin_names())})"
+                             "; give one of those, or the path of a .toml file relative to this file, e.g. "
+                             "base = \"other.toml\"")
+        return builtin_data(ref), None, f"built-in scene {ref!r}"
+    path = Path(ref).expanduser()
+    relative = not path.is_absolute()
+    if relative:
+        if holder is None:
+            raise SceneError(f"{holder_name}: base {short(ref)} is a relative path, but this scene is not read from "
+                             "a file, so there is no directory to resolve it against; give an absolute path or a "
+                             "built-in scene name, or load the scene from a file")
+        path = holder.parent / path
+    where = f"scene file {_path_text(path)}"
+    if not path.is_file():
+        rel = " (relative to the directory of the file holding the base line)" if relative else ""
+        raise SceneError(f"{holder_name}: base {short(ref)} does not exist: no file {_path_text(path)}; "
+                         f"fix the path{rel} or name a built-in scene ({', '.join(builtin_names())})")
+    return _read_file(path, where), path, where
+
+
 def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | None = None) -> Scene:
-    """A scene from a built-in name, a TOML path, or a dict; ``overrides`` are merged on top."""
+    """A scene from a built-in name, a TOML path, or a dict; ``overrides`` are merged on top.
+
+    ``base`` (in a file, a built-in scene or a dict) names the scene to start from: a built-in
+    name, or a file path, relative to the directory of the file holding the ``base`` line (a
+    dict has no directory: its ``base`` may be a built-in name or an absolute path). Bases may
+    nest; a cycle is refused."""
     if source is None:
         source = "hertz"
+    holder: Path | None = None
     if isinstance(source, dict):
         _check_depth(source, "the scene")
         data = source
-    elif str(source).endswith(".toml") or Path(str(source)).suffix:
-        path = Path(source)
-        where = f"scene file {short(str(path))}"
-        if not path.is_file():
-            raise SceneError(f"{where} does not exist")
-        try:
-            data = _toml(path.read_text(encoding="utf-8"), where)
-        except UnicodeDecodeError:
-            raise SceneError(f"{where} is not UTF-8 text; save it as UTF-8 TOML") from None
-        except OSError as e:
-            raise SceneError(f"cannot read {where} ({e.strerror or e}); check its permissions") from None
-        data.setdefault("name", path.stem)
+        name = "the scene (a dict)"
+        seen = []
+    elif is_path(source):
+        holder = Path(source)
+        name = f"scene file {short(str(holder))}"
+        data = _read_file(holder, name)
+        data.setdefault("name", holder.stem)
+        seen = [holder.resolve()]
     else:
         data = builtin_data(str(source))
+        name = f"built-in scene {str(source)!r}"
+        seen = [f"built-in scene {str(source)!r}"]
     data = copy.deepcopy(data)
+    chain = [name]
     while "base" in data:
-        base = data.pop("base")
-        data = merge(builtin_data(base), data)
+        ref = data.pop("base")
+        base, holder, name = _base_data(ref, holder, name)
+        key = holder.resolve() if holder is not None else name
+        chain.append(name)
+        if key in seen:
+            raise SceneError(f"scene bases form a cycle: {' -> '.join(chain)}; remove one of these base lines")
+        seen.append(key)
+        data = merge(base, data)
     for o in overrides or []:
         _check_depth(o, "an override")
         if isinstance(o, dict) and "base" in o:
