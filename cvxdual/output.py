@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import OutputError
-from .figures import figures
+from .figures import DPI, figures
 from .files import json_text, replace_dir, staged_dir, temp_beside
 from .solution import CONTACT_COLUMNS, FLAG_COLUMNS
 from .validate import short
@@ -131,7 +131,7 @@ def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
     }
     if plots:
         for name, fig in figures(sol).items():  # noqa: B007 - fig is bound in the lambda
-            writers[name] = lambda p, fig=fig: fig.savefig(p, dpi=130, format="png", pil_kwargs=PNG_OPTIONS)
+            writers[name] = lambda p, fig=fig: fig.savefig(p, dpi=DPI, format="png", pil_kwargs=PNG_OPTIONS)
     assert set(writers) <= set(SET_FILES)
     try:
         real.parent.mkdir(parents=True, exist_ok=True)

@@ -103,14 +103,57 @@ def _label(keys: tuple, names: list[str]) -> str:
     return ", ".join(str(v) for v in keys if str(v) != "") if names else ""
 
 
-def _plain_log_ticks(ax) -> None:
-    """Log axes labelled 1, 2, 5, 10, 20, ... in plain numbers: spans under a decade still get
-    labels, and minor labels never crowd into each other (as 3x10^0 4x10^0 did)."""
+def _plain(v: float) -> str:
+    """``v`` in plain digits from 0.001 to 9999, else as ``1e4``, ``2e-5`` (not ``10000``, ``1e+06``)."""
+    if v == 0 or 1e-3 <= abs(v) < 1e4:
+        return f"{v:g}"
+    m, e = f"{v:e}".split("e")
+    return f"{m.rstrip('0').rstrip('.')}e{int(e)}"
+
+
+def _log_labels_fit(locator, lim, inches: float, horizontal: bool) -> bool:
+    """Whether the labels (:func:`_plain`) of ``locator``'s ticks in ``lim`` keep 0.1 in apart on
+    an axis ``inches`` long (a label's width estimated at 0.6 em per character)."""
+    from matplotlib import rcParams
+    from matplotlib.font_manager import FontProperties
+    lo, hi = sorted(lim)
+    t = np.asarray(locator.tick_values(lo, hi))
+    t = t[(t >= lo * (1 - 1e-9)) & (t <= hi * (1 + 1e-9))]
+    if len(t) < 2:
+        return True
+    em = FontProperties(size=rcParams["xtick.labelsize" if horizontal else "ytick.labelsize"]).get_size_in_points() / 72
+    size = np.array([0.6 * em * len(_plain(v)) for v in t]) if horizontal else np.full(len(t), 1.2 * em)
+    pos = np.log(t / lo) / np.log(hi / lo) * inches
+    return bool(np.all(np.diff(pos) >= (size[1:] + size[:-1]) / 2 + 0.1))
+
+
+def plain_log_ticks(ax, shrink: float = 0.8) -> None:
+    """Log axes labelled in plain numbers (0.01, 0.02, 0.05, 0.1, ...: spans under a decade
+    still get labels) as densely as they fit without touching: 1, 1.5, 2, 3, 5, 7 per decade,
+    else 1, 2, 5, else each decade, else every few decades (3x10^0 4x10^0 crowded into each
+    other, and so did 0.01 0.02 0.05 over four decades). Call it after plotting; ``shrink``: the
+    share of the axes' current size left after a layout engine makes room for labels."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-    for axis in (ax.xaxis, ax.yaxis):
-        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    w, h = ax.get_position().size * ax.figure.get_size_inches() * shrink
+    for axis, lim, inches, horizontal in ((ax.xaxis, ax.get_xlim(), w, True), (ax.yaxis, ax.get_ylim(), h, False)):
+        for loc in (LogLocator(subs=(1.0, 1.5, 2.0, 3.0, 5.0, 7.0)), LogLocator(subs=(1.0, 2.0, 5.0)),
+                    LogLocator(subs=(1.0,), numticks=99), LogLocator(numticks=max(2, int(inches / 0.7)))):
+            if _log_labels_fit(loc, lim, inches, horizontal):
+                break
+        axis.set_major_locator(loc)
+        axis.set_major_formatter(FuncFormatter(lambda v, _: _plain(v)))
         axis.set_minor_formatter(NullFormatter())
+
+
+def _length_unit(df: pd.DataFrame, scene: str | None) -> str:
+    """The length unit of ``scene``'s rows: from the ``units`` column where the study converted
+    units, else the built-in scene's own (``"scene units"`` for another scene)."""
+    from .. import builtin_scenes, load_scene
+    units = df.loc[df["scene"] == scene, "units"].dropna().astype(str) if "units" in df else pd.Series(dtype=str)
+    units = units[units != ""]
+    if len(units):
+        return units.iloc[0].split(",")[0].strip()
+    return load_scene(scene).units[0] if scene in builtin_scenes() else "scene units"
 
 
 def plot_error(df: pd.DataFrame, x: str = "h", ax=None, scene: str | None = None, reference_error: float | None = None,
@@ -133,13 +176,26 @@ def plot_error(df: pd.DataFrame, x: str = "h", ax=None, scene: str | None = None
                   label=f"{_label(k, keys)} (rate {r:.2f})")
     if reference_error is not None and np.isfinite(reference_error) and reference_error > 0:
         ax.axhline(reference_error, color="gray", lw=0.8, ls=":", label="reference error (est.)")
-    _plain_log_ticks(ax)
+    plain_log_ticks(ax)
     ax.set_title(scene or "")
-    ax.set_xlabel(xlabel or {"h": "mesh size h (largest element)", "t_total": "wall time per solve [s]"}.get(x, x))
-    ax.set_ylabel("relative L2 stress error")
+    if xlabel is None:
+        xlabel = {"h": f"mesh size h, largest element [{_length_unit(df, scene)}]",
+                  "t_total": "wall time per solve [s]"}.get(x, x)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("relative L2 stress error [-]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     return ax
+
+
+def _reference_error(df: pd.DataFrame, refs: dict | None, scene) -> float | None:
+    """The estimated error of ``scene``'s reference: from ``refs`` (the run's), else from the
+    ``reference_error_est`` column (a table read back from its CSV), where there is one."""
+    est = [v.get("error_est") for k, v in (refs or {}).items() if k == scene or k.startswith(f"{scene} ")]
+    if not est and "reference_error_est" in df:
+        col = pd.to_numeric(df.loc[df["scene"] == scene, "reference_error_est"], errors="coerce").dropna()
+        est = list(col[col > 0].unique())
+    return est[0] if len(est) == 1 else None
 
 
 def error_figure(df: pd.DataFrame, x: str, refs: dict | None = None, xlabel: str | None = None):
@@ -149,9 +205,16 @@ def error_figure(df: pd.DataFrame, x: str, refs: dict | None = None, xlabel: str
     fig = Figure(figsize=(4.2 * len(scenes), 4), layout="constrained")
     axes = fig.subplots(1, len(scenes), squeeze=False)[0]
     for ax, scene in zip(axes, scenes, strict=True):
-        est = [v.get("error_est") for k, v in (refs or {}).items() if k == scene or k.startswith(f"{scene} ")]
-        plot_error(df, x, ax=ax, scene=scene, reference_error=est[0] if len(est) == 1 else None, xlabel=xlabel)
+        plot_error(df, x, ax=ax, scene=scene, reference_error=_reference_error(df, refs, scene), xlabel=xlabel)
     return fig
+
+
+def write_plots(df: pd.DataFrame, name: str, out: Path) -> list[Path]:
+    """``NAME_h.png`` and ``NAME_time.png`` in ``out``: the error against h and against time.
+    ``df`` may be the run's table or its CSV read back (``pd.read_csv``): the plots are the same."""
+    refs = df.attrs.get("references", {})
+    return [save_figure(error_figure(df, x, refs), Path(out) / f"{name}{suffix}.png")
+            for x, suffix in (("h", "_h"), ("t_total", "_time"))]
 
 
 def save_figure(fig, path: Path) -> Path:
@@ -259,10 +322,7 @@ def write_outputs(df: pd.DataFrame, study, out: str | Path) -> list[Path]:
     cfg = {"plots": True, **(study.report or {})}
     written = [write_csv(df, out / f"{name}.csv")]
     if cfg["plots"] and len(ok_rows(df)):
-        refs = df.attrs.get("references", {})
-        for x, suffix, label in (("h", "_h", "mesh size h (largest element)"),
-                                 ("t_total", "_time", "wall time per solve [s]")):
-            written.append(save_figure(error_figure(df, x, refs, label), out / f"{name}{suffix}.png"))
+        written += write_plots(df, name, out)
     text = markdown(df, study, name)
     if study.report_hook is not None:
         extra = study.report_hook(df, study, out)

@@ -431,27 +431,36 @@ def _plots(scan: pd.DataFrame, pareto: pd.DataFrame, out) -> None:
 
     from matplotlib.figure import Figure
 
-    from cvxdual.study.report import save_figure
-    fig = Figure(figsize=(15, 4.5), layout="constrained")
-    axes = fig.subplots(1, 3)
+    from cvxdual.study.report import plain_log_ticks, save_figure
     ok = _ok(scan)
     lim = scan[scan.path == "limit"]
+    measured = np.isfinite(pd.to_numeric(scan.peak_mb, errors="coerce"))  # a case's own process peak, or NaN
+    mem = {p: scan[(scan.path == p) & (ok | (p == "limit")) & measured] for p in ("fast", "cvxpy", "limit")}
+    has_mem = any(len(d) for d in mem.values())  # a panel only for what was measured
+    fig = Figure(figsize=(15 if has_mem else 10, 4.5), layout="constrained")
+    axes = fig.subplots(1, 3 if has_mem else 2)
     for path, mk in (("fast", "o-"), ("cvxpy", "s-")):
         d = scan[(scan.path == path) & ok]
         axes[0].loglog(d.n_pieces, d.t_total, mk, label=f"{path}: total")
         axes[0].loglog(d.n_pieces, d.t_solve, mk.replace("-", ":"), label=f"{path}: solve")
-        axes[2].loglog(d.n_pieces, d.peak_mb, mk, label=path)
     axes[0].loglog(lim.n_pieces, lim.t_limit, "k^-", label="limit: factorise + solve K")
-    axes[2].loglog(lim.n_pieces, lim.peak_mb, "k^-", label="limit")
     d = scan[(scan.path == "cvxpy") & ok]
     for ph in ("mesh", "assemble", "build", "solve", "recover"):
         axes[1].loglog(d.n_pieces, d[f"t_{ph}"], "s-", label=f"cvxpy {ph}")
     f = scan[(scan.path == "fast") & ok]
     for ph in ("solve", "recover"):
         axes[1].loglog(f.n_pieces, f[f"t_{ph}"], "o--", label=f"fast {ph}")
-    for ax, t, y in zip(axes, ("time against size", "time per phase", "peak memory"), ("seconds", "seconds", "MB"),
-                        strict=True):
-        ax.set(xlabel="pieces", title=t, ylabel=y)
+    panels = [(axes[0], "time against size", "time [s]"), (axes[1], "time per phase", "time [s]")]
+    if has_mem:
+        for (path, d), mk in zip(mem.items(), ("o-", "s-", "k^-"), strict=True):
+            if len(d):
+                axes[2].loglog(d.n_pieces, d.peak_mb, mk, label=path)
+        panels.append((axes[2], "peak memory of the case's process", "peak memory [MB]"))
+    else:
+        fig.suptitle("peak memory: not measured in this run", fontsize=9)
+    for ax, t, y in panels:
+        ax.set(xlabel="number of pieces [-]", title=t, ylabel=y)
+        plain_log_ticks(ax)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     save_figure(fig, Path(out) / "speed_scaling.png")
@@ -465,8 +474,9 @@ def _plots(scan: pd.DataFrame, pareto: pd.DataFrame, out) -> None:
                       label=f"{path}, {mesh}, {tri}")
         if scene == "hertz":
             ax.axhline(0.01, color="gray", lw=0.8, ls=":")
-        ax.set(xlabel="wall time per solve, mesh to solution [s]", ylabel="relative L2 stress error",
+        ax.set(xlabel="wall time per solve, mesh to solution [s]", ylabel="relative L2 stress error [-]",
                title=f"{scene}: error against time")
+        plain_log_ticks(ax)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     save_figure(fig, Path(out) / "speed_pareto.png")
