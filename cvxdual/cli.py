@@ -36,7 +36,7 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
     lines = [
         f"scene {s['scene']}, {s['triangulation']}, level {s['level']}: {s['n_pieces']} pieces, "
         f"{s['n_stress_unknowns']} stress unknowns, {s['n_dofs']} dofs, {s['n_contact_pairs']} contact pairs",
-        f"solver {s['solver']}: {s['status']} in {s['iterations']} iterations; time {t['total']:.2f} s "
+        f"solver {s['solver']}: {s['status']}, iterations {s['iterations']}; time {t['total']:.2f} s "
         f"(mesh {t['mesh']:.2f}, assemble {t['assemble']:.2f}, build {t['build']:.2f}, "
         f"solve {t['solve']:.2f}, recover {t['recover']:.2f})",
         f"contact: {c['n_active']} active pairs, x in [{_fmt(c['x_min'])}, {_fmt(c['x_max'])}] {L}, "
@@ -96,7 +96,7 @@ def _cmd_solve(args) -> int:
     out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
         check_output_dir(out)  # fail before the work, and create nothing until there are results
-    with _solver_log_on_stderr(args.verbose), _hard_stop(time_limit):
+    with _solver_log_on_stderr(args.verbose), _hard_stop(time_limit if args.own_process else None):
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
                     max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
     written, t_write = [], None
@@ -117,7 +117,8 @@ def _hard_stop(time_limit: float | None):
     """The time limit's last resort on the command line. ``solve`` stops itself at the limit
     (:mod:`cvxdual.progress`), but not inside compiled code that holds on: SCS's setup on a
     level-6 QP factorises for about 13 s. The solvers release the GIL, so a timer thread can
-    end the process then, with the one error line; nothing has been written at that point."""
+    end the process then, with the one error line; nothing has been written at that point.
+    Only where :func:`main` owns the process (called without ``argv``)."""
     if time_limit is None:
         yield
         return
@@ -205,8 +206,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """The command line; ``argv`` (default: ``sys.argv[1:]``) without the program name. Called
+    without ``argv`` (the console script, ``python -m cvxdual.cli``) it may end the process at
+    ``--time-limit`` (:func:`_hard_stop`); called with a list (from Python) it returns instead."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.own_process = argv is None
     with warnings.catch_warnings(record=True) as caught, _progress(args):
         warnings.simplefilter("always")
         try:
@@ -220,30 +225,66 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             print("cvxdual: interrupted", file=sys.stderr)
             return 130
+        except BrokenPipeError:  # the reader of stdout left (`cvxdual solve | head -2`): nothing to report
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # Python's own advice for SIGPIPE
+            return 0
     # a run that worked: its warnings, each once
     for text in dict.fromkeys(one_line(w.message, MAX_MESSAGE) for w in caught):
         print(f"cvxdual: warning: {text}", file=sys.stderr)
     return status
 
 
+class _ProgressLines(logging.Handler):
+    """The progress records (the logger ``cvxdual``, :mod:`cvxdual.progress`) of every running
+    :func:`main` on stderr as ``cvxdual: ...``, each thread's at the level its run asked for.
+    While any run is active the logger passes everything to this handler alone (a caller's
+    root handlers would print the lines twice); the last run to end restores it."""
+
+    def __init__(self):
+        super().__init__()
+        self.levels: dict[int, int] = {}  # thread -> level of its run
+        self.runs_lock = threading.Lock()
+        self.saved = (logging.NOTSET, True)
+
+    def filter(self, record) -> bool:
+        level = self.levels.get(record.thread)
+        return level is not None and record.levelno >= level
+
+    def emit(self, record) -> None:
+        print(f"cvxdual: {record.getMessage()}", file=sys.stderr, flush=True)
+
+    @contextmanager
+    def run(self, level: int):
+        me = threading.get_ident()
+        with self.runs_lock:
+            if not self.levels:
+                self.saved = (log.level, log.propagate)
+                log.setLevel(logging.DEBUG)
+                log.propagate = False
+                log.addHandler(self)
+            self.levels[me] = level
+        try:
+            yield
+        finally:
+            with self.runs_lock:
+                del self.levels[me]
+                if not self.levels:
+                    log.removeHandler(self)
+                    log.setLevel(self.saved[0])
+                    log.propagate = self.saved[1]
+
+
+_PROGRESS = _ProgressLines()
+
+
 @contextmanager
 def _progress(args):
-    """Progress lines (the logger ``cvxdual``, :mod:`cvxdual.progress`) on stderr while ``main`` runs:
-    INFO, DEBUG with ``--verbose``, none with ``--quiet``."""
+    """Progress lines on stderr while ``main`` runs: INFO, DEBUG with ``--verbose``, none with ``--quiet``."""
     if getattr(args, "quiet", False) or args.command != "solve":
         yield
         return
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("cvxdual: %(message)s"))
-    level = logging.DEBUG if args.verbose else logging.INFO
-    saved = log.level
-    log.addHandler(handler)
-    log.setLevel(level)
-    try:
+    with _PROGRESS.run(logging.DEBUG if args.verbose else logging.INFO):
         yield
-    finally:
-        log.removeHandler(handler)
-        log.setLevel(saved)
 
 
 def _fail(message: str) -> int:

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import SolverError, TimeLimitError
+from .errors import SolverError
 from .validate import one_line
 
 # below this many unknowns SuperLU beats CHOLMOD and Pardiso (their set-up and threads cost more
@@ -95,8 +95,6 @@ class SPDFactor:
         make = _FACTOR[self.method]
         try:
             self._solve = make(sp.csr_matrix(A) if lower else sp.tril(A, format="csr"), self)
-        except TimeLimitError:
-            raise  # the run's alarm (cvxdual.progress), not the matrix
         except Exception as e:  # noqa: BLE001 - CHOLMOD raises ArithmeticError(column), the others their own
             why = f"not positive definite at column {e}" if isinstance(e, ArithmeticError) else one_line(e, 120)
             raise SolverError(f"the stiffness matrix could not be factorised by {self.method} ({why}); a body may "

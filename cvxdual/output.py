@@ -105,11 +105,6 @@ def prepare_dir(out: str | Path) -> Path:
     return out
 
 
-def contact_table(sol):
-    """``sol.contact_table()``: the contact pairs as a pandas DataFrame (the columns of ``contact.csv``)."""
-    return sol.contact_table()
-
-
 def write_contact_csv(sol, path) -> None:
     """``contact.csv``, one row per pair (written without pandas: it costs 0.2 s to import)."""
     cols = np.column_stack(list(sol.contact_columns().values())).astype(float)

@@ -246,7 +246,7 @@ def contact_window(sol) -> tuple[float, float, float, float] | None:
     i, j = np.searchsorted(x, [a, b])
     step = float(np.diff(x)[max(i - 1, 0):j + 1].max()) if len(x) > 1 else 0.0
     hw = max((b - a) / 2, 2 * step, 1e-9 * sol.scene.length_scale)
-    (lo, hi), lower = sol.scene.x_extent, sol.scene.bodies[1]
+    (lo, hi), lower = sol.scene.x_extent, sol.scene.lower
     yc = float(lower.face.value((a + b) / 2))
     x0, x1 = max(a - hw, lo), min(b + hw, hi)
     depth = max((x1 - x0) / 2, b - a)
@@ -321,7 +321,7 @@ def _faces(sol, flatten: bool) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]
     true face (where the gap ``eps = f' - f'' + g`` is measured), the upper one raised by the gap
     function ``g``, so that at every contact pair upper minus lower is ``eps`` undeformed and
     ``eps - relative_displacement >= 0`` deformed; ``flatten``: less the lower face ``f''(x)``."""
-    g, lower = sol.scene.gap_profile, sol.scene.bodies[1].face
+    g, lower = sol.scene.gap_profile, sol.scene.lower.face
     out = []
     for bm in sol.mesh.bodies:
         x = bm.columns
@@ -336,7 +336,7 @@ def _mesh_lines(sol, window, flatten: bool) -> list[np.ndarray]:
     column shifted as its face node, :func:`_faces`; vertical displacements), or none where
     there would be more than :data:`MESH_LINES` of either (they would fill the view)."""
     x0, x1, y0, y1 = window
-    g, lower, pts, u = sol.scene.gap_profile, sol.scene.bodies[1].face, sol.mesh.points, sol.displacement
+    g, lower, pts, u = sol.scene.gap_profile, sol.scene.lower.face, sol.mesh.points, sol.displacement
     lines = []
     for bm in sol.mesh.bodies:
         nc, nl = bm.shape
@@ -391,7 +391,7 @@ def plot_deformed(sol, ax=None, window=None):
     half = 0.5 * (x1 - x0) * h_in / w_in / stretch
     ylim = (0.5 * (lo + hi) - half, 0.5 * (lo + hi) + half)
     ax.set(xlim=(x0, x1), ylim=ylim)
-    ax.set_aspect(stretch, adjustable="datalim")
+    ax.set_aspect(stretch, adjustable="box")  # the limits above already fit the box: it keeps its size
     lines = _mesh_lines(sol, (x0, x1, *ylim), flatten)
     if lines:
         ax.add_collection(LineCollection(lines, colors="0.6", linewidths=0.4, label="mesh, deformed"),
@@ -402,7 +402,7 @@ def plot_deformed(sol, ax=None, window=None):
         ax.plot(x, y, "--", color="k", lw=0.8, label="faces, undeformed" if k else None)
         # the upper line wider: where the faces touch, both stay visible
         ax.plot(x, yd, "-", color=color, lw=2.4 - k, label=f"{name}, deformed", gid=f"deformed face {k}")
-    lower = sol.scene.bodies[1].name
+    lower = sol.scene.lower.name
     ax.set(xlabel=f"x [{L}]", ylabel=f"{f'y - {lower} face' if flatten else 'y'} [{L}], vertical x{stretch:g}",
            title="faces at true displacement scale")
     ax.ticklabel_format(useOffset=False)
@@ -410,11 +410,12 @@ def plot_deformed(sol, ax=None, window=None):
     return ax
 
 
-def _y_range(ax, values: np.ndarray, above: float) -> None:
+def _y_range(ax, values: np.ndarray, above: float, scale: float) -> None:
     """y limits from zero or below up to above ``values``, ``above`` of their span more on top
-    (a legend's room); a uniform field's rounding noise is not blown up to the axis height."""
+    (a legend's room); a uniform field's rounding noise is not blown up to the axis height, and
+    all-zero values get the span ``scale`` (of the quantity in the run)."""
     top, bottom = max(float(values.max(initial=0.0)), 0.0), min(float(values.min(initial=0.0)), 0.0)
-    span = top - bottom or 1.0
+    span = top - bottom or scale or 1.0
     ax.set_ylim(bottom - 0.05 * span, top + above * span)
     ax.ticklabel_format(axis="y", useOffset=False)
 
@@ -439,7 +440,7 @@ def plot_gap(sol, ax=None, xlim=None):
     ax.plot(x, gap, "k--", lw=1, label="initial gap")
     ax.plot(x, rel, "-", color="tab:blue", lw=1.2, label="approach (relative displacement)")
     ax.plot(x[act], rel[act], "o", color="tab:red", ms=3, label="active pairs")
-    _y_range(ax, np.r_[gap, rel], 0.3)
+    _y_range(ax, np.r_[gap, rel], 0.3, float(np.abs(sol.displacement).max()))
     ax.set(xlim=xlim, xlabel=f"x [{L}]", ylabel=f"normal gap and approach [{L}]",
            title="gap and approach at the contact pairs")
     ax.legend(fontsize=7, loc="upper center", ncol=2)
@@ -463,7 +464,7 @@ def plot_pressure(sol, ax=None, xlim=None):
         pe = exact_field(sol.scene).pressure(xs)
         ax.plot(xs, pe, "k-", lw=1, label=label)
         p = np.r_[p, pe]
-    _y_range(ax, p, 0.12)
+    _y_range(ax, p, 0.12, float(np.abs(c["pressure"]).max()))
     ax.set(xlim=xlim, xlabel=f"x [{L}]", ylabel=f"contact pressure [{S}]")
     n_out = len(c["x"]) - int(((c["x"] >= xlim[0]) & (c["x"] <= xlim[1])).sum())
     ax.set_title(f"{sol.scene.name}: {c['n_active']} active pairs of {len(c['x'])}"

@@ -117,11 +117,14 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
     wall = time.perf_counter() - t0
     status = problem.status
     if status not in accept:
-        ran = getattr(problem.solver_stats, "solve_time", None) or wall  # the solver's own clock, if it reports one
-        if time_limit is not None and ran >= 0.99 * time_limit and status in ("user_limit", "optimal_inaccurate"):
-            # SCS reports a time-out as 'optimal_inaccurate'
-            raise TimeLimitError(f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s "
-                              f"(status '{status}'); raise time_limit or try a coarser mesh")
+        ran = getattr(problem.solver_stats, "solve_time", None) or 0.0  # the solver's own clock, if it reports one
+        # SCS reports a time-out as 'optimal_inaccurate'; the solver may have been given what CVXPY's
+        # compile left of the limit (``run``), so the call's own wall time is the measure too
+        if time_limit is not None and max(ran, wall) >= 0.99 * time_limit and status in ("user_limit",
+                                                                                       "optimal_inaccurate"):
+            stop = f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s (status '{status}')"
+            raise TimeLimitError(f"{stop}; raise time_limit or try a coarser mesh",
+                                 cli=f"{stop}; raise --time-limit or lower --level")
         text = (advice or {}).get(status) or _ADVICE.get(status, "try another solver")
         raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}")
     stats = problem.solver_stats

@@ -98,10 +98,6 @@ def stress_measures(stress: np.ndarray, factor: np.ndarray) -> dict:
             "principal_2": c - r}
 
 
-def _lower(scene) -> int:
-    return next(k for k, b in enumerate(scene.bodies) if b.position == "lower")
-
-
 def _face_interp(x: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Values ``v`` at the pairs ``x``, at the line points: the ends and the midpoints."""
     return np.concatenate([v[:1], 0.5 * (v[:-1] + v[1:]), v[-1:]])
@@ -113,7 +109,7 @@ def contact_lines(sol) -> dict:
     mesh, scene = sol.mesh, sol.scene
     x = mesh.pair_x
     xe = _face_interp(x, x)
-    lower = _lower(scene)
+    lower = scene.bodies.index(scene.lower)
     n = len(x)
     col = sol.contact_columns()
     data = {"pressure": col["pressure"].astype(float), "gap": col["gap"].astype(float),

@@ -6,6 +6,7 @@ pyproject.toml), and the session fails if anything else appeared (``git status``
 """
 
 import contextlib
+import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -15,13 +16,15 @@ from hypothesis.configuration import set_hypothesis_home_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 # Hypothesis keeps its example database and constants under .hypothesis/ of the working directory
-set_hypothesis_home_dir(tempfile.mkdtemp(prefix="cvxdual-tests-hypothesis-"))
+HYPOTHESIS_HOME = tempfile.mkdtemp(prefix="cvxdual-tests-hypothesis-")
+set_hypothesis_home_dir(HYPOTHESIS_HOME)
 LEFT_ALONE = ("__pycache__", ".venv")  # Python's bytecode cache; the environment the tests run in
 _BEFORE = pytest.StashKey[set | None]()
 
 
 def _tree_entries() -> set[str] | None:
-    """Untracked and ignored entries of the working tree (``None`` outside a git checkout)."""
+    """Changed, untracked and ignored entries of the working tree, with their status (``None``
+    outside a git checkout)."""
     try:
         p = subprocess.run(["git", "status", "--porcelain", "--ignored", "--untracked-files=all"], cwd=ROOT,
                            capture_output=True, text=True, timeout=60)
@@ -29,8 +32,7 @@ def _tree_entries() -> set[str] | None:
         return None
     if p.returncode:
         return None
-    return {line[3:] for line in p.stdout.splitlines() if line[:2] in ("??", "!!")
-            and not any(part in LEFT_ALONE for part in Path(line[3:]).parts)}
+    return {line for line in p.stdout.splitlines() if not any(part in LEFT_ALONE for part in Path(line[3:]).parts)}
 
 
 def pytest_sessionstart(session):
@@ -38,14 +40,14 @@ def pytest_sessionstart(session):
 
 
 def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(HYPOTHESIS_HOME, ignore_errors=True)
     before = session.config.stash.get(_BEFORE, None)
     after = _tree_entries() if before is not None else None
     if after is not None and after - before:
         new = sorted(after - before)
         session.config.get_terminal_writer().line(
-            f"the tests left files in the working tree: {', '.join(new[:10])}", red=True)
+            f"the tests changed the working tree (git status): {', '.join(new[:10])}", red=True)
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
-
 
 
 @contextlib.contextmanager

@@ -4,7 +4,7 @@ A page's fenced blocks run in the page's order, in one scratch directory per pag
 ``tmp_path``), as a reader would run them one after the other in a new directory:
 
 - ```` ```python ````: ``exec`` in a fresh namespace, the scratch directory as working directory.
-- ```` ```sh ````: ``bash -e`` in the scratch directory, which holds ``.venv`` (a symbolic link to
+- ```` ```sh ````: ``bash -e -o pipefail`` (and no traceback in its output) in the scratch directory, which holds ``.venv`` (a symbolic link to
   the prefix of the interpreter running the tests, ``sys.prefix``: the virtual environment the
   README's install command makes) and copies of ``studies/`` and ``examples/``. ``PATH`` is that
   of a fresh shell, without the environment's ``bin``: a block must say ``.venv/bin/cvxdual``, or
@@ -181,7 +181,7 @@ def run_sh(block: Block, work: Path, logs: Path) -> None:
     script.write_text(rewrite_installs(block))
     log = logs / f"block-{block.line}.log"
     with open(log, "wb") as out:
-        proc = subprocess.Popen(["bash", "-e", str(script)], cwd=work, env=fresh_env(), stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen(["bash", "-e", "-o", "pipefail", str(script)], cwd=work, env=fresh_env(), stdin=subprocess.DEVNULL,
                                 stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             rc = proc.wait(BLOCK_TIMEOUT)
@@ -190,10 +190,13 @@ def run_sh(block: Block, work: Path, logs: Path) -> None:
         finally:
             kill_group(proc.pid)
             proc.wait()
-    if rc != 0:
-        tail = log.read_text(errors="replace")[-4000:]
-        why = f"timed out after {BLOCK_TIMEOUT} s" if rc is None else f"exited with status {rc}"
-        pytest.fail(f"{block.where}: the sh block {why}:\n{block.code}\n--- output (end) ---\n{tail}")
+    text = log.read_text(errors="replace")
+    # a command shown failing on purpose (`... || echo ...`) must fail with its one line, not crash
+    crashed = "Traceback (most recent call last)" in text
+    if rc != 0 or crashed:
+        why = ("printed a traceback" if crashed else f"timed out after {BLOCK_TIMEOUT} s" if rc is None
+               else f"exited with status {rc}")
+        pytest.fail(f"{block.where}: the sh block {why}:\n{block.code}\n--- output (end) ---\n{text[-4000:]}")
 
 
 def run_python(block: Block, work: Path) -> None:

@@ -12,7 +12,7 @@ import pytest
 import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.errors import SceneError
-from cvxdual.output import CONTACT_COLUMNS, contact_table, write_contact_csv
+from cvxdual.output import CONTACT_COLUMNS, write_contact_csv
 from cvxdual.scene import Friction, convert_units
 from cvxdual.scenefile import load_scene, parse_assignment
 from cvxdual.solution import Solution
@@ -190,7 +190,7 @@ def test_csv_and_table_write_the_friction_columns(tmp_path):
     # %.12g keeps 12 significant digits: the round trip's relative error is below 5e-12
     np.testing.assert_allclose(back["tangential_force"], sol.contact["tangential_force"], rtol=1e-11)
     np.testing.assert_allclose(back["slip"], sol.contact["slip"], rtol=1e-11)
-    t = contact_table(sol)
+    t = sol.contact_table()
     assert list(t.columns) == list(CONTACT_COLUMNS)
     assert t["stick"].tolist() == [1, 1, 0, 0] and t["active"].tolist() == [1, 1, 0, 1]
     assert t["stick"].dtype.kind == "i" and t["active"].dtype.kind == "i"
@@ -202,7 +202,7 @@ def test_missing_friction_data_is_not_made_up(tmp_path, missing):
     with pytest.raises(KeyError, match=missing):
         write_contact_csv(sol, tmp_path / "contact.csv")
     with pytest.raises(KeyError, match=missing):
-        contact_table(sol)
+        sol.contact_table()
     assert not (tmp_path / "contact.csv").exists()
 
 
@@ -214,4 +214,4 @@ def test_real_solve_writes_the_friction_columns(tmp_path):
     assert list(c.columns) == list(CONTACT_COLUMNS)
     assert len(c) == len(sol.contact["x"])
     assert set(c["stick"].unique()) <= {0, 1}
-    assert list(contact_table(sol).columns) == list(CONTACT_COLUMNS)
+    assert list(sol.contact_table().columns) == list(CONTACT_COLUMNS)
