@@ -324,7 +324,8 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
         sigma = np.zeros((3 * space.n_tri, 3, 3))
         info = {"solver": "none (no load, no interference)", "status": "optimal", "iterations": 0}
     else:
-        with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({solver})") as p:
+        name = "fast path" if solver == FAST else solver
+        with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({name})") as p:
             try:
                 start = warm_start_active(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
                 u, p0_info = solve_fast(system, start)

@@ -4,8 +4,8 @@ A page's fenced blocks run in the page's order, in one scratch directory per pag
 ``tmp_path``), as a reader would run them one after the other in a new directory:
 
 - ```` ```python ````: ``exec`` in a fresh namespace, the scratch directory as working directory.
-- ```` ```sh ````: ``bash -e -o pipefail`` (and no traceback in its output) in the scratch directory, which holds ``.venv`` (a symbolic link to
-  the prefix of the interpreter running the tests, ``sys.prefix``: the virtual environment the
+- ```` ```sh ````: ``bash -e -o pipefail``, with no traceback in its output, in the scratch
+  directory, which holds ``.venv`` (a symbolic link to the prefix of the interpreter running the tests, ``sys.prefix``: the virtual environment the
   README's install command makes) and copies of ``studies/`` and ``examples/``. ``PATH`` is that
   of a fresh shell, without the environment's ``bin``: a block must say ``.venv/bin/cvxdual``, or
   ``source .venv/bin/activate`` before a plain ``cvxdual``, as the reader must. The block runs in
@@ -181,8 +181,8 @@ def run_sh(block: Block, work: Path, logs: Path) -> None:
     script.write_text(rewrite_installs(block))
     log = logs / f"block-{block.line}.log"
     with open(log, "wb") as out:
-        proc = subprocess.Popen(["bash", "-e", "-o", "pipefail", str(script)], cwd=work, env=fresh_env(), stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+        proc = subprocess.Popen(["bash", "-e", "-o", "pipefail", str(script)], cwd=work, env=fresh_env(),
+                                stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             rc = proc.wait(BLOCK_TIMEOUT)
         except subprocess.TimeoutExpired:
