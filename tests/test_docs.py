@@ -5,12 +5,13 @@ A page's fenced blocks run in the page's order, in one scratch directory per pag
 
 - ```` ```python ````: ``exec`` in a fresh namespace, the scratch directory as working directory.
 - ```` ```sh ````: ``bash -e -o pipefail``, with no traceback in its output, in the scratch
-  directory, which holds ``.venv`` (a symbolic link to the prefix of the interpreter running the tests, ``sys.prefix``: the virtual environment the
-  README's install command makes) and copies of ``studies/`` and ``examples/``. ``PATH`` is that
-  of a fresh shell, without the environment's ``bin``: a block must say ``.venv/bin/cvxdual``, or
-  ``source .venv/bin/activate`` before a plain ``cvxdual``, as the reader must. The block runs in
-  its own process group, which is killed when the block ends (background commands such as
-  ``dask scheduler ... &``).
+  directory, which holds ``.venv`` (a symbolic link to the prefix of the interpreter running the
+  tests, ``sys.prefix``: the virtual environment the README's install command makes) and copies
+  of ``studies/`` and ``examples/``. ``PATH`` is that of a fresh shell, without the
+  environment's ``bin``: a block must say ``.venv/bin/cvxdual``, or ``source
+  .venv/bin/activate`` before a plain ``cvxdual``, as the reader must. The block runs in its own
+  process group, which is killed when the block ends (background commands such as ``dask
+  scheduler ... &``).
 - The two install commands of the Quick start cannot run here: they would rebuild the
   environment running the tests. Their ``python3 -m venv .venv && .venv/bin/pip install``
   prefix must be the one ``.ci/run`` uses and they must install this repository (``.`` or
