@@ -12,7 +12,6 @@ import sys
 import threading
 import warnings
 from contextlib import contextmanager, redirect_stdout
-from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -96,7 +95,8 @@ def _cmd_solve(args) -> int:
     out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
         check_output_dir(out)  # fail before the work, and create nothing until there are results
-    with _solver_log_on_stderr(args.verbose), _hard_stop(time_limit if args.own_process else None):
+    hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
+    with _solver_log_on_stderr(args.verbose), hard_stop:
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
                     max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
     written, t_write = [], None
@@ -113,7 +113,7 @@ HARD_STOP_GRACE = 1.0  # seconds past --time-limit for the run to stop itself be
 
 
 @contextmanager
-def _hard_stop(time_limit: float | None):
+def _hard_stop(time_limit: float | None, fast: bool):
     """The time limit's last resort on the command line. ``solve`` stops itself at the limit
     (:mod:`cvxdual.progress`), but not inside compiled code that holds on: SCS's setup on a
     level-6 QP factorises for about 13 s. The solvers release the GIL, so a timer thread can
@@ -124,8 +124,9 @@ def _hard_stop(time_limit: float | None):
         return
 
     def stop():
-        _fail(f"stopped at the time limit of {time_limit:g} s inside the solver, which cannot be interrupted "
-              "there; raise --time-limit, lower --level or use --solver fast")
+        _fail(f"stopped at the time limit of {time_limit:g} s inside compiled code (a solver or a factorisation), "
+              "which cannot be interrupted; " + ("raise --time-limit or lower --level" if fast else
+                                                 "raise --time-limit, lower --level or use --solver fast"))
         sys.stderr.flush()
         os._exit(1)
 
@@ -168,7 +169,8 @@ def _cmd_study(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cvxdual", description="Dual finite element analysis of frictionless "
                                 "(or Tresca) contact of two plane elastic bodies (Tran Van Bon 1986) on CVXPY.")
-    p.add_argument("--version", action="version", version=f"cvxdual {version('cvxdual')}")
+    import cvxdual  # the package's version: pyproject.toml's, as installed
+    p.add_argument("--version", action="version", version=f"cvxdual {cvxdual.__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("scenes", help="list the built-in scenes").set_defaults(func=_cmd_scenes)
     s = sub.add_parser("solve", help="solve a scene and write its outputs")

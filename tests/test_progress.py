@@ -216,8 +216,8 @@ def test_cli_hard_stop_ends_a_solver_that_cannot_be_interrupted(tmp_path):
     p, took = _run_cli(["solve", "--level", "1", "--time-limit", "0.5", "--out", "o"], tmp_path, code)
     assert p.returncode == 1
     assert p.stderr.strip().splitlines() == [
-        "cvxdual: error: stopped at the time limit of 0.5 s inside the solver, which cannot be interrupted there; "
-        "raise --time-limit, lower --level or use --solver fast"]
+        "cvxdual: error: stopped at the time limit of 0.5 s inside compiled code (a solver or a factorisation), "
+        "which cannot be interrupted; raise --time-limit, lower --level or use --solver fast"]
     assert took < 30.0  # far below the 60 s the stuck phase would take
     assert list(tmp_path.iterdir()) == []
 
