@@ -12,21 +12,23 @@ import numpy as np
 from .errors import ModelError
 
 
+def body_factors(scene) -> np.ndarray:
+    """Factor ``c`` with ``s33 = c (s11 + s22)`` per body of ``scene``: ``nu`` in plane strain,
+    0 in plane stress, NaN for a body given by its Hooke matrix alone in plane strain (no ``nu``)."""
+    return np.array([0.0 if b.material.plane == "stress" else np.nan if b.material.nu is None
+                     else float(b.material.nu) for b in scene.bodies])
+
+
 def out_of_plane_factor(scene, body: np.ndarray) -> np.ndarray:
     """Factor ``c`` with ``s33 = c (s11 + s22)`` at stress points of the bodies ``body`` (indices
     into ``scene.bodies``): ``nu`` of the body in plane strain, 0 in plane stress. A body given
-    by its Hooke matrix alone has no ``nu``."""
-    c = []
-    for b in scene.bodies:
-        m = b.material
-        if m.plane == "stress":
-            c.append(0.0)
-        elif m.nu is None:
+    by its Hooke matrix alone has no ``nu``: refused."""
+    c = body_factors(scene)
+    for b, ck in zip(scene.bodies, c, strict=True):
+        if np.isnan(ck):
             raise ModelError(f"body {b.name!r} has a Hooke matrix but no Poisson ratio, so s33 (and von Mises) "
                              "is not defined in plane strain; give the material as E and nu")
-        else:
-            c.append(float(m.nu))
-    return np.asarray(c)[np.asarray(body)]
+    return c[np.asarray(body)]
 
 
 def shear_stress(stress: np.ndarray) -> np.ndarray:

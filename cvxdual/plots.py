@@ -321,14 +321,17 @@ def _faces(sol, flatten: bool) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]
     true face (where the gap ``eps = f' - f'' + g`` is measured), the upper one raised by the gap
     function ``g``, so that at every contact pair upper minus lower is ``eps`` undeformed and
     ``eps - relative_displacement >= 0`` deformed; ``flatten``: less the lower face ``f''(x)``."""
-    g, lower = sol.scene.gap_profile, sol.scene.lower.face
     out = []
     for bm in sol.mesh.bodies:
-        x = bm.columns
-        y = bm.body.face.value(x) + (g.value(x) if bm.body.position == "upper" else 0.0)
-        y = y - lower.value(x) if flatten else y
-        out.append((x, y, y + sol.displacement[bm.side_nodes("face"), 1]))
+        y = _face_drawn(sol, bm.body, bm.columns, flatten)
+        out.append((bm.columns, y, y + sol.displacement[bm.side_nodes("face"), 1]))
     return out
+
+
+def _face_drawn(sol, body, x: np.ndarray, flatten: bool) -> np.ndarray:
+    """The undeformed face of ``body`` at ``x`` as :func:`plot_deformed` draws it (:func:`_faces`)."""
+    y = body.face.value(x) + (sol.scene.gap_profile.value(x) if body.position == "upper" else 0.0)
+    return y - sol.scene.lower.face.value(x) if flatten else y
 
 
 def _mesh_lines(sol, window, flatten: bool) -> list[np.ndarray]:
@@ -336,14 +339,13 @@ def _mesh_lines(sol, window, flatten: bool) -> list[np.ndarray]:
     column shifted as its face node, :func:`_faces`; vertical displacements), or none where
     there would be more than :data:`MESH_LINES` of either (they would fill the view)."""
     x0, x1, y0, y1 = window
-    g, lower, pts, u = sol.scene.gap_profile, sol.scene.lower.face, sol.mesh.points, sol.displacement
+    pts, u = sol.mesh.points, sol.displacement
     lines = []
     for bm in sol.mesh.bodies:
         nc, nl = bm.shape
         c = bm.columns
         span = slice(bm.offset, bm.offset + bm.n_nodes)
-        shift = bm.body.face.value(c) - bm.face_y + (g.value(c) if bm.body.position == "upper" else 0.0)
-        shift = shift - lower.value(c) if flatten else shift
+        shift = _face_drawn(sol, bm.body, c, flatten) - bm.face_y
         y = pts[span, 1].reshape(nc, nl) + shift[:, None] + u[span, 1].reshape(nc, nl)
         i = np.flatnonzero((c >= x0) & (c <= x1))
         if not len(i):
@@ -380,10 +382,10 @@ def plot_deformed(sol, ax=None, window=None):
         ys = np.concatenate([np.r_[y[(x >= x0) & (x <= x1)], yd[(x >= x0) & (x <= x1)]] for x, y, yd in faces])
         return (float(ys.min()), float(ys.max())) if len(ys) else (-1.0, 1.0)
 
-    lo, hi = extent(_faces(sol, False))
-    flo, fhi = extent(_faces(sol, True))
+    drawn = {f: _faces(sol, f) for f in (False, True)}
+    (lo, hi), (flo, fhi) = extent(drawn[False]), extent(drawn[True])
     flatten = hi - lo > 5 * (fhi - flo)  # the face's own curvature would take most of the height
-    faces = _faces(sol, flatten)
+    faces = drawn[flatten]
     lo, hi = (flo, fhi) if flatten else (lo, hi)
     span = max(hi - lo, 1e-6 * (x1 - x0))
     w_in, h_in = ax.get_position().size * ax.figure.get_size_inches()

@@ -54,12 +54,10 @@ no ``s33``: its ``von_mises`` is NaN (the principal stresses are in-plane and al
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import ModelError
-from .invariants import out_of_plane_factor, shear_stress, von_mises
+from .invariants import body_factors, shear_stress, von_mises
 from .locate import nearest_node_values
 from .pieces import piece_outlines
 
@@ -68,21 +66,6 @@ from .pieces import piece_outlines
 VTU_COMPRESSION = None
 LINE_KIND = -1  # piece_kind of the contact line cells
 INT_FILL = -1  # integer cell arrays where they do not apply (active on the area cells)
-
-
-def _s33_factor(scene, body: np.ndarray) -> np.ndarray:
-    """:func:`~cvxdual.invariants.out_of_plane_factor` at bodies ``body``, NaN for a body
-    without ``s33`` (a Hooke matrix alone in plane strain) instead of the error."""
-    try:
-        return out_of_plane_factor(scene, body)
-    except ModelError:
-        per = []
-        for b in scene.bodies:  # body by body: the function reads ``scene.bodies`` alone
-            try:
-                per.append(float(out_of_plane_factor(SimpleNamespace(bodies=(b,)), [0])[0]))
-            except ModelError:
-                per.append(np.nan)
-        return np.asarray(per)[np.asarray(body)]
 
 
 def stress_measures(stress: np.ndarray, factor: np.ndarray) -> dict:
@@ -187,7 +170,7 @@ def _write_eq_vtu(sol, path) -> None:
     pbody = np.concatenate([np.repeat(cb, 3), np.full(len(s_line), lines["body"])])
     # point data on the cells' points and then the line points (the order _write puts them in)
     point = {k: np.ascontiguousarray(val)
-             for k, val in {**stress_measures(s, _s33_factor(sol.scene, pbody)), "stress": s}.items()}
+             for k, val in {**stress_measures(s, body_factors(sol.scene)[pbody]), "stress": s}.items()}
     cell = {"piece_kind": [np.zeros(len(cb), np.int32)], "body": [cb.astype(np.int32)]}
     if sol.bounds is not None:
         cell["bound_contribution"] = [sol.bounds["contributions"]["sub"].ravel()]
@@ -220,7 +203,7 @@ def write_vtu(sol, path: str | Path) -> None:
     take = (lambda a: a) if identity else (lambda a: a[order])  # noqa: E731
     stress = take(sol.stress)
     body = take(p.body).astype(np.int32)
-    per = {**stress_measures(stress, _s33_factor(sol.scene, body)), "stress": stress, "body": body,
+    per = {**stress_measures(stress, body_factors(sol.scene)[body]), "stress": stress, "body": body,
            "piece_kind": take(p.kind).astype(np.int32)}
     if sol.bounds is not None:  # flat faces only: the pieces are the mesh triangles, in order
         per["bound_contribution"] = take(sol.bounds["contributions"]["element"])
