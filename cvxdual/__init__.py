@@ -9,7 +9,6 @@ Names from the paper are used where they help a reader holding it: ``lam`` (stre
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _version
 
-from .assembly import System, assemble
 from .errors import (
     AccuracyError,
     CvxdualError,
@@ -24,14 +23,15 @@ from .errors import (
     UnbalancedLoadError,
     UnknownSolverError,
 )
-from .exact import exact_field
-from .materials import Material
-from .mesh import build_mesh
+from .geometry.mesh import build_mesh
+from .geometry.triangulation import discretize
+from .p0.assembly import System, assemble
 from .pipeline import build_model, build_system, recover, solve
-from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
-from .scenefile import builtin_scenes, load_scene
+from .reference.exact import exact_field
+from .scene.materials import Material
+from .scene.scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
+from .scene.scenefile import builtin_scenes, load_scene
 from .solution import Solution
-from .triangulation import discretize
 
 try:  # the installed distribution's version: pyproject.toml is its one source
     __version__ = _version("cvxdual")

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CvxdualError
+from .model.solvers import LARGE_QP
 from .progress import check_time_limit, log, phase
-from .solvers import LARGE_QP
 from .validate import one_line
 
 MAX_MESSAGE = 400  # characters of an error line: a sentence, never a dump of the input
@@ -74,18 +74,18 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
 
 
 def _cmd_scenes(args) -> int:
-    from .scenefile import builtin_scenes
+    from .scene.scenefile import builtin_scenes
     for name, desc in builtin_scenes().items():
         print(f"{name:20s} {desc}")
     return 0
 
 
 def _cmd_solve(args) -> int:
-    from .output import check_output_dir, write_outputs
+    from .geometry.triangulation import check_triangulation
+    from .model.solvers import resolve_solver
+    from .outputs.output_set import check_output_dir, write_outputs
     from .pipeline import solve
-    from .scenefile import load_scene, parse_assignment
-    from .solvers import resolve_solver
-    from .triangulation import check_triangulation
+    from .scene.scenefile import load_scene, parse_assignment
     from .validate import file_stem
 
     scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])

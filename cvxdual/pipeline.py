@@ -17,16 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .assembly import System, assemble
 from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
-from .fast import solve_fast, transfer_active  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
-from .mesh import check_level, mesh_size
+from .geometry.mesh import check_level, mesh_size
+from .geometry.triangulation import check_triangulation, discretize
+from .model.solvers import DEFAULT_SOLVER, FAST, TIME_LIMIT_OPTION, default_solver, resolve_solver
+from .p0.assembly import System, assemble
+from .p0.fast import solve_fast, transfer_active  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
 from .progress import Deadline, phase
-from .scene import Scene
+from .scene.scene import Scene
 from .sizing import check_size
 from .solution import Solution, check_solution, evaluate
-from .solvers import DEFAULT_SOLVER, FAST, TIME_LIMIT_OPTION, default_solver, resolve_solver
-from .triangulation import check_triangulation, discretize
 from .validate import one_line, short
 
 log = logging.getLogger(__name__)
@@ -47,12 +47,12 @@ def as_scene(scene) -> Scene:
         return scene
     if not isinstance(scene, (str, Path, dict)):
         raise SceneError(f"expected a Scene, a built-in scene name or a .toml path, got {type(scene).__name__}")
-    from .scenefile import load_scene
+    from .scene.scenefile import load_scene
     return load_scene(scene)
 
 
 def build_system(scene, triangulation: str = "type1", level: int | None = None) -> System:
-    """Mesh and assemble ``scene``: the :class:`~cvxdual.assembly.System` of the discrete problem."""
+    """Mesh and assemble ``scene``: the :class:`~cvxdual.p0.assembly.System` of the discrete problem."""
     scene = as_scene(scene)
     return assemble(*discretize(scene, check_triangulation(triangulation), level))
 
@@ -60,13 +60,13 @@ def build_system(scene, triangulation: str = "type1", level: int | None = None) 
 def build_model(scene, triangulation: str = "type1", level: int | None = None, limit_analysis: bool = False,
                 stress_space: str = "p0"):
     """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it: a
-    :class:`~cvxdual.dual.DualModel` (with the scene's friction, if it has any), or with
-    ``stress_space="eq"`` an :class:`~cvxdual.eqmodel.EquilibriumModel` (flat faces, frictionless)."""
+    :class:`~cvxdual.p0.dual.DualModel` (with the scene's friction, if it has any), or with
+    ``stress_space="eq"`` an :class:`~cvxdual.eq.model.EquilibriumModel` (flat faces, frictionless)."""
     scene = as_scene(scene)
     triangulation = check_triangulation(triangulation)
     if check_stress_space(stress_space) == "eq":
-        from .eqmodel import EquilibriumModel
-        from .equilibrium import EquilibriumSpace, check_flat
+        from .eq.model import EquilibriumModel
+        from .eq.space import EquilibriumSpace, check_flat
         check_flat(scene)
         if scene.friction is not None:
             raise CvxdualError("the equilibrium stress space is frictionless; drop the scene's friction or use "
@@ -77,8 +77,8 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
 
 
 def _dual_model(system: System, triangulation: str, limit_analysis: bool = False):
-    """The :class:`~cvxdual.dual.DualModel` of ``system`` with its scene's friction, if any."""
-    from .dual import DualModel
+    """The :class:`~cvxdual.p0.dual.DualModel` of ``system`` with its scene's friction, if any."""
+    from .p0.dual import DualModel
     model = DualModel(system, triangulation, limit_analysis)
     friction = system.mesh.scene.friction
     if friction is not None:
@@ -92,10 +92,10 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
           **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
-    ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.fast`
+    ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.p0.fast`
     (warm-started from level ``level - 2`` unless ``warm_start`` is false). By default (no
     solver and no options) the CVXPY solver measured fastest at the mesh's size
-    (:func:`cvxdual.solvers.default_solver`: Clarabel, SCS from 2e4 pieces), handing over to
+    (:func:`cvxdual.model.solvers.default_solver`: Clarabel, SCS from 2e4 pieces), handing over to
     Clarabel where it fails; options alone go to Clarabel.
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
     stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
@@ -171,7 +171,7 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
     """The paper's P0 run (see :func:`solve`)."""
     deadline = deadline or Deadline()
     if bounds:
-        from .equilibrium import check_flat
+        from .eq.space import check_flat
         check_flat(scene)
     t0 = time.perf_counter()
     with phase("mesh", deadline) as p:
@@ -227,11 +227,11 @@ def _solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: 
         fields = evaluate(system, t, u, info)
         p.detail = "residuals" + (", error against the exact field" if fields["error"] is not None else "")
         if bounds:
-            from .equilibrium import EquilibriumSpace
+            from .eq.space import EquilibriumSpace
             space = EquilibriumSpace.from_mesh(mesh)
             # the equilibrium stresses by the fast route whatever the P0 solver (the same QP, exact)
             sigma, _ = solve_eq(space, FAST, (mesh.pair_x, fields["contact"]["active"]))
-            from .bounds import certified_bounds
+            from .eq.bounds import certified_bounds
             fields["bounds"] = certified_bounds(space, sigma, fields["displacement"])
             fields["space"] = space
             p.detail += ", certified bounds"
@@ -264,7 +264,7 @@ def warm_start_active(scene: Scene, triangulation: str, level: int, pair_x: np.n
 
 def recover(model, triangulation: str | None = None, level: int | None = None, info: dict | None = None,
             check: bool = True) -> Solution:
-    """The :class:`Solution` of a :class:`~cvxdual.dual.DualModel` solved by the caller: the
+    """The :class:`Solution` of a :class:`~cvxdual.p0.dual.DualModel` solved by the caller: the
     same as ``model.solution(check)`` (the other arguments are kept for old callers and must
     agree with the model)."""
     if triangulation is not None and triangulation != model.triangulation:
@@ -280,7 +280,7 @@ def recover(model, triangulation: str | None = None, level: int | None = None, i
 def eq_contact(space, system: System, sigma: np.ndarray, v: np.ndarray, blocks: dict) -> dict:
     """Contact quantities of equilibrium stresses at the pairs (:func:`cvxdual.solution.edge_contact`
     of the contact tractions read from the lower face)."""
-    from .bounds import contact_tractions
+    from .eq.bounds import contact_tractions
     from .solution import edge_contact
     return edge_contact(system, -contact_tractions(space, sigma, blocks), v)
 
@@ -290,11 +290,11 @@ def solve_eq(space, solver: str, pairs: tuple | None = None, **solver_options) -
     The fast path starts from the active contact ``pairs = (x, active)`` of a P0 solve on the
     same mesh (one iteration when the P0 contact zone is right, a few more where P0 locks)."""
     if solver == FAST:
-        from .eqfast import active_from_pairs, solve_eq_fast
+        from .eq.fast import active_from_pairs, solve_eq_fast
         start = None if pairs is None else active_from_pairs(space, *pairs)
         y, info = solve_eq_fast(space, start)
         return space.stresses(y), info
-    from .eqmodel import EquilibriumModel
+    from .eq.model import EquilibriumModel
     model = EquilibriumModel(space)
     info = model.solve(solver, **solver_options)
     return model.stresses(), info
@@ -306,7 +306,7 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
     """The "eq" run: the P1 displacement from the fast path, the equilibrium stresses on the
     same mesh, the certified bounds between them (always: ``bounds`` is implied) and the errors
     against an exact field. (Flat faces: both triangulations are the same mesh.)"""
-    from .equilibrium import EquilibriumSpace, check_flat
+    from .eq.space import EquilibriumSpace, check_flat
     check_flat(scene)
     deadline = deadline or Deadline()
     t0 = time.perf_counter()
@@ -333,7 +333,7 @@ def _solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: 
             except SolverError:
                 if solver == FAST:
                     raise
-                from .dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
+                from .p0.dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
                 model = DualModel(system)
                 model.solve(solver, time_limit=deadline.remaining() if solver in TIME_LIMIT_OPTION else None)
                 u, pairs = model.displacements(), None
@@ -356,8 +356,8 @@ def _eq_solution(scene, triangulation, level, system, space, sigma, u, info, tim
     """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma`` and ``u``; ``times``
     of the phases before (the recovery's and the total are added)."""
     t3 = time.perf_counter()
-    from .bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
-    from .exact import exact_field
+    from .eq.bounds import certified_bounds, constraint_blocks, contact_slack, exact_errors, residuals
+    from .reference.exact import exact_field
     blocks = constraint_blocks(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
     v = b["displacement"]

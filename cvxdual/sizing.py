@@ -1,7 +1,7 @@
 """Size estimates before allocation: a run that will not fit in memory is refused up front,
 with the estimate and how to override it, instead of dying in an allocation or an OOM kill.
 
-The mesh is counted without being built (:func:`~cvxdual.mesh.mesh_size`), and memory is
+The mesh is counted without being built (:func:`~cvxdual.geometry.mesh.mesh_size`), and memory is
 ``BASE + triangles * cost`` with per-triangle costs measured as peak resident memory of whole
 solves (``studies/memory.py`` measures them again and compares with this estimate, in
 ``reports/memory.md``). The estimate is for Clarabel and the fast path; first-order and dense
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import TooLargeError
-from .mesh import mesh_size
-from .triangulation import column_breaks
+from .geometry.mesh import mesh_size
+from .geometry.triangulation import column_breaks
 from .validate import short
 
 BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)

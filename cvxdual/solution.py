@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import System
 from .errors import AccuracyError
-from .exact import exact_field
-from .norms import VOIGT_WEIGHT, stress_error
-from .scene import Scene
+from .p0.assembly import System
+from .p0.norms import VOIGT_WEIGHT, stress_error
+from .reference.exact import exact_field
+from .scene.scene import Scene
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of

@@ -57,7 +57,7 @@ import numpy as np
 
 import cvxdual
 from cvxdual.files import atomic_path, write_text
-from cvxdual.hertz import HertzData, hertz_line_contact
+from cvxdual.reference.hertz import HertzData, hertz_line_contact
 
 SCENE = "hertz"
 

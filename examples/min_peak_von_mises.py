@@ -23,12 +23,12 @@ the mean is tested) and, ``vm`` being convex, the mean's von Mises is at most th
 maximum on the piece (Jensen). So the P0 value lies *below* ``k*`` -- up to the quadrature
 of the boundary tractions, which makes it an estimate from below, not a certified bound.
 
-*eq* (:class:`cvxdual.equilibrium.EquilibriumSpace`, the Johnson-Mercier space): exactly
+*eq* (:class:`cvxdual.eq.space.EquilibriumSpace`, the Johnson-Mercier space): exactly
 admissible fields, linear on every sub-triangle; ``vm`` is convex, so capping it at the three
 vertices of every sub-triangle caps it everywhere. ``cvxdual.build_model(scene,
-stress_space="eq")`` (:class:`cvxdual.eqmodel.EquilibriumModel`) takes the same objective,
+stress_space="eq")`` (:class:`cvxdual.eq.model.EquilibriumModel`) takes the same objective,
 ``cp.max(model.von_mises())`` over the sub-triangle vertices. After the solve the model makes the
-field exact (:func:`cvxdual.equilibrium.make_exact`), and the largest von Mises value at the
+field exact (:func:`cvxdual.eq.space.make_exact`), and the largest von Mises value at the
 vertices of that exact field, ``model.stresses()``, is the certified value: an exactly admissible
 field (for the loads as the eq space represents them: the boundary tractions linear on each
 edge) whose von Mises nowhere exceeds it -- an upper bound on ``k*``.
@@ -61,8 +61,8 @@ import numpy as np
 
 import cvxdual
 from cvxdual.files import atomic_path, write_text
-from cvxdual.hertz import mcewen_stress
-from cvxdual.invariants import out_of_plane_factor, von_mises
+from cvxdual.reference.hertz import mcewen_stress
+from cvxdual.voigt import out_of_plane_factor, von_mises
 
 SCENE = "hertz"
 # a pair carries load if its force exceeds this fraction of the largest: the interior-point

@@ -24,7 +24,7 @@ such fields therefore approaches ``2 + pi`` from *below*.
 
 Discretisation
 --------------
-The Johnson-Mercier space of :mod:`cvxdual.equilibrium` (``sigma = S y + alpha sigma0``, linear on
+The Johnson-Mercier space of :mod:`cvxdual.eq.space` (``sigma = S y + alpha sigma0``, linear on
 the three sub-triangles of every mesh triangle) is exactly admissible by construction, except for
 ``div sigma = 0``, kept as linear equality constraints on ``y``. ``tau`` is convex and ``sigma`` is
 linear on each sub-triangle, so ``tau <= k`` at its three vertices means ``tau <= k`` on all of it:
@@ -36,10 +36,10 @@ stresses are not capped. The result is a conic program::
                 tau(S y + alpha sigma0) <= k  at the 9 vertices of every block triangle.
 
 :func:`cvxdual.build_model` with ``stress_space="eq", limit_analysis=True`` builds all of it but
-the yield rows (an :class:`cvxdual.eqmodel.EquilibriumModel`: ``load_factor`` is ``alpha``, a
+the yield rows (an :class:`cvxdual.eq.model.EquilibriumModel`: ``load_factor`` is ``alpha``, a
 variable, maximised); ``model.add_constraint(model.shear_cap(k, where=model.vertex_body == 1))``
 adds them. An interior-point solver returns ``(y, alpha)`` to about 1e-8, not exactly; after the
-solve the model makes the field exact per unit load (:func:`cvxdual.equilibrium.make_exact`:
+solve the model makes the field exact per unit load (:func:`cvxdual.eq.space.make_exact`:
 contact tractions clipped and balanced, ``div sigma = 0`` projected to rounding), so
 ``model.stresses()`` is exactly admissible for the load ``alpha q`` -- but only inside the yield
 set to the solver's tolerance. The *certified* value scales it by ``1 / max(1, max tau / k)``,
@@ -72,7 +72,7 @@ import numpy as np
 
 import cvxdual
 from cvxdual.files import atomic_path, write_text
-from cvxdual.invariants import shear_stress
+from cvxdual.voigt import shear_stress
 
 K = 1.0  # shear yield stress k
 B = 1.0  # punch half-width b

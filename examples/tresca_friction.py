@@ -13,7 +13,7 @@ solved with Tresca friction of slip threshold ``g = 0.1 p0`` and without frictio
 - ``similar``: ``hertz`` with both bodies of steel (E = 210 GPa), elastically similar, with
   ``p0 = 5070 MPa`` and ``a = 4.39 mm`` for that pair.
 
-``p0`` and ``a`` come from :func:`cvxdual.hertz.hertz_line_contact` with the scene's own data
+``p0`` and ``a`` come from :func:`cvxdual.reference.hertz.hertz_line_contact` with the scene's own data
 (its materials, ``R`` and load), and ``g = 0.1 p0``: 358.5 MPa for the dissimilar pair,
 507.0 MPa for the similar one.
 
@@ -56,7 +56,7 @@ When friction matters
 Under a normal load, elastically *similar* bodies have no tendency to slip: their surface points
 move tangentially by the same amount (Dundurs' ``beta = 0``; Johnson, *Contact Mechanics*, 1985,
 on interface friction in normal contact). Friction then changes nothing, and the relative L2
-difference (area and Voigt weighted, :data:`cvxdual.norms.VOIGT_WEIGHT`) between the Tresca and
+difference (area and Voigt weighted, :data:`cvxdual.p0.norms.VOIGT_WEIGHT`) between the Tresca and
 the frictionless stresses goes to zero with ``h``. The built-in ``hertz`` meshes of the two bodies
 are exact mirror images, so with equal materials the discrete slip tendency is *exactly* zero too.
 The difference is then solver noise (1e-9 to 1e-7), and it does not decrease with the level. The
@@ -104,8 +104,8 @@ import numpy as np
 
 import cvxdual
 from cvxdual.files import atomic_path, write_text
-from cvxdual.hertz import HertzData, hertz_line_contact, hertz_pressure
-from cvxdual.norms import l2_norm
+from cvxdual.p0.norms import l2_norm
+from cvxdual.reference.hertz import HertzData, hertz_line_contact, hertz_pressure
 
 G_OVER_P0 = 0.1  # the Tresca threshold g = 0.1 p0
 # "similar": steel on steel, the cylinder meshed unlike the block (no mirror symmetry, see above)

@@ -12,11 +12,11 @@ In plane strain ``e33 = 0`` gives ``s33 = nu (s11 + s22)`` and the von Mises str
     vm(s) = sqrt(((s11 - s22)^2 + (s22 - s33)^2 + (s33 - s11)^2) / 2 + 3 s12^2),
 
 a norm of an affine map of ``s`` (convex, one second-order cone per piece):
-``model.von_mises()``. Its numpy twin is :func:`cvxdual.invariants.von_mises`.
+``model.von_mises()``. Its numpy twin is :func:`cvxdual.voigt.von_mises`.
 
 Elastic peak
 ------------
-Of the exact field (:func:`cvxdual.hertz.mcewen_stress`) the peak lies on the symmetry axis,
+Of the exact field (:func:`cvxdual.reference.hertz.mcewen_stress`) the peak lies on the symmetry axis,
 below the surface: ``vm = 0.557 p0`` at depth ``z = 0.70 a`` for ``nu = 0.3`` (Johnson,
 *Contact Mechanics*, 1985, section 5.6: about ``0.56 p0`` at ``0.70 a``). :func:`exact_peak`
 computes it; the piecewise-constant (P0) solution's largest piece value comes within about 0.5 %.
@@ -63,9 +63,9 @@ from scipy.optimize import minimize_scalar
 
 import cvxdual
 from cvxdual.files import atomic_path, write_text
-from cvxdual.hertz import mcewen_stress
-from cvxdual.invariants import out_of_plane_factor, von_mises
-from cvxdual.pieces import piece_outlines
+from cvxdual.geometry.pieces import piece_outlines
+from cvxdual.reference.hertz import mcewen_stress
+from cvxdual.voigt import out_of_plane_factor, von_mises
 
 SCENE = "hertz"
 CAP_FRACTION = 0.9  # the cap as a fraction of the elastic peak
@@ -106,7 +106,7 @@ def cap_study(level: int, fraction: float = CAP_FRACTION, scene=SCENE) -> dict:
     (``twin_difference``, relative), ``elastic_peak`` with its ``peak_depth``, ``cap``,
     ``capped_peak``, ``at_cap`` (mask of pieces within :data:`AT_CAP` of the cap), the energies
     ``energy_elastic``, ``energy_capped`` (per unit thickness, N mm/mm), the solve times, the exact
-    peak (``exact_peak``, ``exact_depth``), ``hertz`` (:class:`~cvxdual.hertz.HertzData`), the two
+    peak (``exact_peak``, ``exact_depth``), ``hertz`` (:class:`~cvxdual.reference.hertz.HertzData`), the two
     solutions' checks (``checks_elastic``, ``checks``), ``model`` and ``system``.
     """
     model = cvxdual.build_model(scene, level=level)

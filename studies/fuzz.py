@@ -31,11 +31,11 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 import numpy as np
+from cvxdual.testing import check_result, perturb
 
 import cvxdual as cd
 from cvxdual.files import write_text
-from cvxdual.scenefile import builtin_data, builtin_names, load_scene
-from cvxdual.testing import check_result, perturb
+from cvxdual.scene.scenefile import builtin_data, builtin_names, load_scene
 
 HOSTILITY = (0.0, 0.0, 0.1, 0.3, 1.0)  # most cases plausible, so that many reach the solvers
 NOT_FINDINGS = ("ok", "rejected", "timeout", "fallback")

@@ -28,8 +28,8 @@ from pathlib import Path
 import cvxdual
 from cvxdual import files
 from cvxdual.files import write_text
-from cvxdual.output import write_outputs
-from cvxdual.scenefile import load_scene, parse_assignment
+from cvxdual.outputs.output_set import write_outputs
+from cvxdual.scene.scenefile import load_scene, parse_assignment
 
 ROOT = Path(__file__).resolve().parents[1]
 

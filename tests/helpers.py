@@ -20,11 +20,11 @@ def primal(scene: str, level: int, triangulation: str = "type1"):
 
 
 def contains(pieces, pts):
-    """Brute force, independent of cvxdual.locate: boolean (m, n_pieces), which pieces contain
+    """Brute force, independent of cvxdual.geometry.locate: boolean (m, n_pieces), which pieces contain
     each point (barycentric signs for triangles, bounds for slabs)."""
     import numpy as np
 
-    from cvxdual.pieces import slab_bound
+    from cvxdual.geometry.pieces import slab_bound
 
     m = len(pts)
     hit = np.zeros((m, len(pieces)), bool)

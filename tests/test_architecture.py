@@ -60,9 +60,9 @@ def test_no_import_cycles():
 
 
 @pytest.mark.parametrize("module, forbidden", [
-    ("cvxdual.fast", {"cvxdual.mesh", "cvxdual.triangulation", "cvxdual.scenefile", "cvxdual.dual"}),
-    ("cvxdual.assembly", {"cvxdual.dual", "cvxdual.fast", "cvxdual.pipeline"}),
-    ("cvxdual.plots", {"cvxdual.output"}),
+    ("cvxdual.p0.fast", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation", "cvxdual.scene.scenefile", "cvxdual.p0.dual"}),
+    ("cvxdual.p0.assembly", {"cvxdual.p0.dual", "cvxdual.p0.fast", "cvxdual.pipeline"}),
+    ("cvxdual.outputs.plots", {"cvxdual.outputs.output_set"}),
 ])
 def test_layering(module, forbidden):
     graph, _ = _graph()

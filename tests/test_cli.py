@@ -9,7 +9,7 @@ import pytest
 from helpers import without_progress
 
 from cvxdual.cli import main
-from cvxdual.scenefile import builtin_names
+from cvxdual.scene.scenefile import builtin_names
 
 SUMMARY_KEYS = {"scene", "triangulation", "level", "n_pieces", "n_stress_unknowns", "n_dofs",
                 "n_contact_pairs", "solver", "status", "objective", "duality_gap", "residuals", "contact",
@@ -166,7 +166,7 @@ def test_bad_geometry_one_line_error_nothing_written(tmp_path, capsys, args, wor
 
 
 def test_hooke_material_from_the_command_line(tmp_path, capsys):
-    from cvxdual.materials import Material
+    from cvxdual.scene.materials import Material
     C = Material.isotropic(70000.0, 0.3).stiffness.tolist()
     assert main(["solve", "--scene", "patch", "--level", "0", "--no-output",
                  "--set", f"bodies.top.material={{hooke={C}}}"]) == 0

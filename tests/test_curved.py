@@ -5,11 +5,11 @@ import pytest
 from helpers import contains
 
 import cvxdual as cd
-from cvxdual.assembly import assemble
-from cvxdual.boundary import side_quadrature
-from cvxdual.locate import locate
+from cvxdual.geometry.boundary import side_quadrature
+from cvxdual.geometry.locate import locate
+from cvxdual.geometry.triangulation import discretize, stretches
+from cvxdual.p0.assembly import assemble
 from cvxdual.scene import BoundaryPart, Traction
-from cvxdual.triangulation import discretize, stretches
 
 CURVED = ["cylinder-on-block", "cylinder-in-groove", "wavy"]
 CASES = [(s, t, L) for s in CURVED for t in ("type1", "type2") for L in (0, 1, 2)]
@@ -164,7 +164,7 @@ def test_too_coarse_for_curvature_is_a_clear_error():
 def test_both_types_converge_together(scene):
     """Both triangulations solve at 5 levels (status optimal, residuals checked by solve), and
     their stresses approach each other as h shrinks."""
-    from cvxdual.norms import stress_distance
+    from cvxdual.p0.norms import stress_distance
     sc = cd.load_scene(scene)
     dist, hs = [], []
     for level in range(5):
@@ -182,7 +182,7 @@ def test_both_types_converge_together(scene):
 
 @pytest.mark.parametrize("scene,tri", [(s, t) for s in CURVED for t in ("type1", "type2")])
 def test_dual_and_primal_agree_on_curved_scenes(scene, tri):
-    from cvxdual.norms import l2_norm
+    from cvxdual.p0.norms import l2_norm
     sol = cd.solve(cd.load_scene(scene), tri, 2)
     pm = cd.PrimalModel(sol.system)
     pm.solve()
@@ -212,7 +212,7 @@ def test_wavy_contact_in_separate_patches():
 def test_curved_pieces_in_vtu(tmp_path):
     import meshio
 
-    from cvxdual.output import write_vtu
+    from cvxdual.outputs.output_set import write_vtu
     sol = cd.solve(cd.load_scene("cylinder-in-groove"), "type2", 1)
     write_vtu(sol, tmp_path / "s.vtu")
     m = meshio.read(tmp_path / "s.vtu")
@@ -264,7 +264,7 @@ def test_distance_between_non_nested_meshes_refines_straddling_pieces():
     rule misplaces the jumps of the studied field inside reference pieces. Re-integrating the
     pieces that straddle studied pieces with a finer rule must move the figure toward a much
     finer rule's value (measured: plain 2x2 is 1.9% off, 2x2 with 6x6 on straddlers 0.6%)."""
-    from cvxdual.norms import stress_distance
+    from cvxdual.p0.norms import stress_distance
     sc = cd.load_scene("cylinder-in-groove")
     ref, sol = cd.solve(sc, "type2", 3, "fast"), cd.solve(sc, "type2", 1, "fast")
     truth = stress_distance(ref, sol, 6, 24)["l2_rel"]

@@ -1,4 +1,4 @@
-"""The fast path of the equilibrium dual (cvxdual/eqfast.py, docs/equilibrium.md section 10):
+"""The fast path of the equilibrium dual (cvxdual/eq/fast.py, docs/equilibrium.md section 10):
 the same solution as the CVXPY path, exact after the post-step, KKT conditions, warm and
 cold starts, a clear error when the contact set cycles."""
 
@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.bounds import residuals
-from cvxdual.eqfast import (
+from cvxdual.eq.bounds import residuals
+from cvxdual.eq.fast import (
     HybridSolver,
     active_from_pairs,
     solve_eq_fast,
     triangle_dofs,
 )
-from cvxdual.eqmodel import EquilibriumModel
-from cvxdual.equilibrium import EquilibriumSpace
+from cvxdual.eq.model import EquilibriumModel
+from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.errors import SolverError
 
 # Clarabel stops at relative gaps ~1e-8: its stresses differ from the exact optimum by ~1e-8-1e-7

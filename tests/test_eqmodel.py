@@ -1,4 +1,4 @@
-"""The equilibrium-space model (cvxdual.eqmodel): the same handles as the P0 DualModel, and
+"""The equilibrium-space model (cvxdual.eq.model): the same handles as the P0 DualModel, and
 every solution exactly admissible whatever the user changed."""
 
 import cvxpy as cp
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.bounds import ADMISSIBLE_TOL, residuals
-from cvxdual.invariants import out_of_plane_factor, shear_stress, von_mises
+from cvxdual.eq.bounds import ADMISSIBLE_TOL, residuals
+from cvxdual.voigt import out_of_plane_factor, shear_stress, von_mises
 
 
 @pytest.fixture

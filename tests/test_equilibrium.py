@@ -9,8 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 import cvxdual as cd
-from cvxdual.boundary import supported
-from cvxdual.bounds import (
+from cvxdual.eq.bounds import (
     admissible_displacement,
     certified_bounds,
     constraint_blocks,
@@ -19,10 +18,11 @@ from cvxdual.bounds import (
     residuals,
     vtu_cells,
 )
-from cvxdual.eqmodel import EquilibriumModel
-from cvxdual.equilibrium import EquilibriumSpace, make_exact, rigid_modes
+from cvxdual.eq.element import divergence_rows, edge_dof_rows, internal_rows, local_basis
+from cvxdual.eq.model import EquilibriumModel
+from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_modes
 from cvxdual.errors import SceneError
-from cvxdual.jm import divergence_rows, edge_dof_rows, internal_rows, local_basis
+from cvxdual.geometry.boundary import supported
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision
 # times the O(10-100) terms of a row); 1e-12 leaves a margin of 10-100.

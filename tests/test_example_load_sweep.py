@@ -11,7 +11,7 @@ import pytest
 from helpers import load_example
 
 import cvxdual
-from cvxdual.hertz import hertz_line_contact
+from cvxdual.reference.hertz import hertz_line_contact
 
 LEVEL = 2
 

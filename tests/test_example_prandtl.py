@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import load_example
 
-from cvxdual.bounds import ADMISSIBLE_TOL, residuals
+from cvxdual.eq.bounds import ADMISSIBLE_TOL, residuals
 
 ex = load_example("prandtl_punch")
 

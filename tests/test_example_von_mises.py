@@ -11,13 +11,13 @@ import pytest
 from helpers import load_example
 
 import cvxdual
-from cvxdual.bounds import ADMISSIBLE_TOL, residuals
-from cvxdual.hertz import mcewen_stress
-from cvxdual.invariants import von_mises
-from cvxdual.materials import Material
-from cvxdual.modelling import USER_TOLERANCE
-from cvxdual.scenefile import builtin_data
+from cvxdual.eq.bounds import ADMISSIBLE_TOL, residuals
+from cvxdual.model.base import USER_TOLERANCE
+from cvxdual.reference.hertz import mcewen_stress
+from cvxdual.scene.materials import Material
+from cvxdual.scene.scenefile import builtin_data
 from cvxdual.solution import TOLERANCES
+from cvxdual.voigt import von_mises
 
 cap_ex = load_example("von_mises_cap")
 mp_ex = load_example("min_peak_von_mises")

@@ -6,7 +6,7 @@ import scipy.sparse as sp
 from helpers import solved
 
 import cvxdual as cd
-from cvxdual.norms import l2_norm
+from cvxdual.p0.norms import l2_norm
 
 SCENES = ["patch", "hertz", "blocks", "cylinder-on-block", "cylinder-in-groove", "wavy"]
 
@@ -79,8 +79,8 @@ def test_unloaded_scene_gives_zero_stress():
 def test_every_factorisation_backend_solves_the_stiffness():
     """The backends the fast path and the speed "limit" choose between solve an SPD stiffness
     for one and several right-hand sides; the limit reports the fastest of them."""
-    from cvxdual.factor import LARGE_FROM, SPDFactor, backend, backends
-    from cvxdual.fast import limit
+    from cvxdual.linalg.factor import LARGE_FROM, SPDFactor, backend, backends
+    from cvxdual.p0.fast import limit
     system = cd.build_system("hertz", "type1", 2)
     lim = limit(system)
     assert lim["backend"] in backends() and lim["t_limit"] == min(lim[f"t_limit_{b}"] for b in backends())
@@ -103,7 +103,7 @@ def test_every_factorisation_backend_solves_the_stiffness():
 def test_every_backend_refuses_a_singular_stiffness():
     """An unanchored floating mode makes the stiffness singular: every backend (SuperLU and QDLDL
     factor without pivoting, so they check their pivots) refuses it instead of solving."""
-    from cvxdual.factor import SPDFactor, backends
+    from cvxdual.linalg.factor import SPDFactor, backends
     s = cd.build_system("hertz", "type1", 0)
     K = (s.Z.T @ s.stiffness() @ s.Z).tocsr()
     for m in backends():
@@ -115,7 +115,7 @@ def test_every_backend_refuses_a_singular_stiffness():
 def test_fast_path_on_the_large_backends_agrees_with_cvxpy(monkeypatch, method):
     """The large meshes' backends (taking the lower triangle) on a small mesh: the same stresses
     as Clarabel, as the default backend gives."""
-    import cvxdual.factor as factor
+    import cvxdual.linalg.factor as factor
     if method not in factor.backends():
         pytest.skip(f"{method} is not installed here")
     monkeypatch.setattr(factor, "backend", lambda n=None: method)  # as above LARGE_FROM

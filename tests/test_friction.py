@@ -2,7 +2,7 @@
 
 All solves use Clarabel (its defaults: 1e-8 relative feasibility and gap). ``g`` is a fraction
 of the scene's own Hertz ``p0`` (3585.4 MPa for the default hertz, 5070.5 MPa when both bodies
-have E = 210 GPa). Stresses are compared in the relative L2 norm that :mod:`cvxdual.norms`
+have E = 210 GPa). Stresses are compared in the relative L2 norm that :mod:`cvxdual.p0.norms`
 uses (area- and ``VOIGT_WEIGHT``-weighted). The g -> inf limit is checked against the
 independent displacement QP :class:`cvxdual.PrimalModel` with ``stick``.
 """
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.norms import VOIGT_WEIGHT
+from cvxdual.p0.norms import VOIGT_WEIGHT
 from cvxdual.solution import TOLERANCES, duality_gap
 
 SCENES = {
@@ -37,7 +37,7 @@ def p0(kind: str) -> float:
 
 
 def rel_l2(system, t, ref) -> float:
-    """``||t - ref||_0 / ||ref||_0`` of piecewise-constant stresses (cvxdual.norms' weights)."""
+    """``||t - ref||_0 / ||ref||_0`` of piecewise-constant stresses (cvxdual.p0.norms' weights)."""
     a = system.pieces.area[:, None]
     return float(np.sqrt(np.sum(a * VOIGT_WEIGHT * (t - ref) ** 2) / np.sum(a * VOIGT_WEIGHT * ref**2)))
 

@@ -8,12 +8,12 @@ import resource
 
 import numpy as np
 import pytest
+from cvxdual.testing import check_result, perturb
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import cvxdual as cd
-from cvxdual.scenefile import builtin_data, builtin_names, load_scene, merge
-from cvxdual.testing import check_result, perturb
+from cvxdual.scene.scenefile import builtin_data, builtin_names, load_scene, merge
 
 # headroom over the test process's own address space: level 0-1 scenes need a few hundred MB,
 # so a case that gets near 2 GB is a mesh the size check should have refused

@@ -1,10 +1,10 @@
-"""Physics checks of the Hertz line contact and the McEwen field (cvxdual.hertz)."""
+"""Physics checks of the Hertz line contact and the McEwen field (cvxdual.reference.hertz)."""
 
 import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from cvxdual.hertz import HertzData, body_stress, hertz_line_contact, hertz_pressure, mcewen_stress
+from cvxdual.reference.hertz import HertzData, body_stress, hertz_line_contact, hertz_pressure, mcewen_stress
 
 # NAFEMS-style cylinder on block, plane strain, mm and MPa.
 NAFEMS = dict(E1=70000.0, nu1=0.3, E2=210000.0, nu2=0.3, R=50.0, load=35000.0)

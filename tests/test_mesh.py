@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.mesh import build_mesh, graded_points
+from cvxdual.geometry.mesh import build_mesh, graded_points
 
 
 def test_graded_points_nested_and_halving():

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.invariants import out_of_plane_factor, shear_stress, von_mises
+from cvxdual.voigt import out_of_plane_factor, shear_stress, von_mises
 
 # the same QP solved twice by Clarabel (1e-8 gaps and feasibility) agrees to about 1e-9 of its
 # scale: 1e-7 leaves a margin of 100 and still catches a wrong row or scale (errors are O(1))

@@ -16,7 +16,7 @@ from helpers import solved
 
 from cvxdual import files
 from cvxdual.errors import OutputError
-from cvxdual.output import check_output_dir, write_outputs
+from cvxdual.outputs.output_set import check_output_dir, write_outputs
 
 A_ARGS, B_ARGS = ("patch", 1), ("patch", 0)
 

@@ -14,8 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.text import Text
 
 import cvxdual
-from cvxdual.figures import figures
-from cvxdual.plots import Triangles, contact_zone
+from cvxdual.outputs.figures import figures
+from cvxdual.outputs.plots import Triangles, contact_zone
 from cvxdual.solution import TOLERANCES
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
@@ -213,9 +213,8 @@ def test_report_plots_have_units_and_no_overlapping_ticks():
 
 
 def test_speed_plot_draws_memory_only_where_measured(tmp_path):
-    from PIL import Image
-
     from cvxdual.study.specs.speed import _paths, _plots
+    from PIL import Image
     d = _paths(pd.read_csv(REPORTS / "speed.csv"))
     scan, pareto = d[d.part == "scan"], d[d.part == "pareto"]
     _plots(scan, pareto, tmp_path)

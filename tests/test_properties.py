@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import cvxdual as cd
-from cvxdual.scenefile import scene_from_dict
+from cvxdual.scene.scenefile import scene_from_dict
 from cvxdual.solution import TOLERANCES
 from cvxdual.validate import TINY
 
@@ -123,7 +123,7 @@ def test_invalid_scenes_rejected_cleanly(case):
 
 
 def test_inverted_and_misaligned_meshes_are_rejected():
-    from cvxdual.mesh import _pairs, build_mesh, check_triangles
+    from cvxdual.geometry.mesh import _pairs, build_mesh, check_triangles
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [2.0, 0.0]])
     with pytest.raises(cd.MeshError, match="inverted or zero-area"):
         check_triangles(pts, np.array([[0, 2, 1]]))  # clockwise: inverted

@@ -12,9 +12,9 @@ import pytest
 import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.errors import SceneError
-from cvxdual.output import CONTACT_COLUMNS, write_contact_csv
+from cvxdual.outputs.output_set import CONTACT_COLUMNS, write_contact_csv
 from cvxdual.scene import Friction, convert_units
-from cvxdual.scenefile import load_scene, parse_assignment
+from cvxdual.scene.scenefile import load_scene, parse_assignment
 from cvxdual.solution import Solution
 
 BASE = 'base = "patch"\n'

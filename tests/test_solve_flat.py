@@ -5,7 +5,7 @@ import pytest
 from helpers import primal, solved
 
 import cvxdual as cd
-from cvxdual.norms import l2_norm
+from cvxdual.p0.norms import l2_norm
 from cvxdual.scene import convert_units
 
 

@@ -132,9 +132,9 @@ def test_convergence_spec_small(client, tmp_path):
 
 def test_speed_limit_rows(client, tmp_path):
     """The speed study's pseudo-solver ``limit`` (one factorisation) next to a solve, in processes."""
-    import cvxdual.fast
-    if not hasattr(cvxdual.fast, "limit"):
-        pytest.skip("cvxdual.fast.limit is not there yet")
+    import cvxdual.p0.fast
+    if not hasattr(cvxdual.p0.fast, "limit"):
+        pytest.skip("cvxdual.p0.fast.limit is not there yet")
     spec = {"name": "lim", "scenes": ["hertz"], "levels": [1], "overrides": {"mesh": {"columns": 4}},
             "cases": [{"solvers": ["limit"], "isolate": "process"}, {"solvers": ["fast"]}]}
     df = run(spec, None, client=client, cache=None, quiet=True).set_index("solver")

@@ -10,11 +10,11 @@ import pytest
 
 import cvxdual as cd
 from cvxdual.cli import main
-from cvxdual.materials import Material
-from cvxdual.output import write_contact_csv
-from cvxdual.pieces import piece_outlines
+from cvxdual.geometry.pieces import piece_outlines
+from cvxdual.outputs.output_set import write_contact_csv
+from cvxdual.outputs.vtu import stress_measures, write_vtu
+from cvxdual.scene.materials import Material
 from cvxdual.solution import TOLERANCES
-from cvxdual.vtu import stress_measures, write_vtu
 
 EPS = np.finfo(float).eps
 STRESS = ("s11", "s22", "s12", "von_mises", "principal_1", "principal_2")
@@ -38,7 +38,7 @@ def write_read(sol, tmp_path, name="s.vtu"):
 
 def cell_order(sol):
     """Piece index of every area cell: the straight pieces, then the curved ones as
-    :func:`~cvxdual.pieces.piece_outlines` lists them (the order of the module docstring)."""
+    :func:`~cvxdual.geometry.pieces.piece_outlines` lists them (the order of the module docstring)."""
     p = sol.pieces
     return np.concatenate([np.flatnonzero(p.kind == 0), *(ids for ids, _ in piece_outlines(p))])
 

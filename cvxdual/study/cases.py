@@ -108,7 +108,7 @@ def load_reference_stress(cache: Cache, key: str, n_pieces: int) -> np.ndarray |
 def scene_of(source: str, overrides: tuple, units: tuple | None):
     """The scene of a case: source with overrides applied, converted to ``units``."""
     from .. import load_scene
-    from ..scene import convert_units
+    from ..scene.scene import convert_units
     from .spec import nest
     scene = load_scene(source, [nest(k, v) for k, v in overrides])
     if units is not None:
@@ -133,7 +133,7 @@ def case_key(case: Case, scene_repr: str, hooks_hash: str = "") -> str:
 
 @dataclass
 class Field:
-    """A piecewise-constant stress field on a mesh (what :func:`cvxdual.norms.stress_distance` needs)."""
+    """A piecewise-constant stress field on a mesh (what :func:`cvxdual.p0.norms.stress_distance` needs)."""
 
     scene: object
     mesh: object
@@ -185,7 +185,7 @@ def reference_level_task(source: str, overrides: tuple, units, ref: Reference, l
 def reference_info_task(source: str, overrides: tuple, units, ref: Reference, metrics: tuple, cache_root: str,
                         *levels_done) -> dict:
     """Worker task: the reference's estimated error from the two levels below it (cached)."""
-    from ..norms import stress_distance
+    from ..p0.norms import stress_distance
     scene = scene_of(source, overrides, units)
     cache = Cache(cache_root)
     key = reference_key(repr(scene), ref, metrics)
@@ -260,7 +260,7 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
         kw["stress_space"] = case.stress_space
     if dict(case.tags).get("timing") == "steady":
         # one-time library start-up first (imports, solver set-up), as the limit excludes its own
-        from ..fast import start_up
+        from ..p0.fast import start_up
         solve(scene, case.triangulation, 0, case.solver, check=False, fallback=False)
         if case.solver == "fast":
             start_up()
@@ -314,7 +314,7 @@ def solution_fields(sol) -> dict:
 
 def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:
     from .. import exact_field
-    from ..norms import stress_distance, stress_error
+    from ..p0.norms import stress_distance, stress_error
     m = dict(case.metrics)
     out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
            "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
@@ -356,7 +356,7 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
 
 def edge_share(sol, ex, rule: int) -> float:
     """Share of the squared L2 error within ``EDGE_RADIUS * a`` of the Hertz contact edges."""
-    from ..norms import VOIGT_WEIGHT
+    from ..p0.norms import VOIGT_WEIGHT
     pts, w, idx = sol.pieces.quadrature(rule)
     body = sol.pieces.body[idx]
     ref = np.empty((len(pts), 3))
@@ -370,7 +370,7 @@ def edge_share(sol, ex, rule: int) -> float:
 
 
 def _limit(case: Case, scene) -> dict:
-    """The speed "limit" (:func:`cvxdual.fast.limit`): the fastest factorisation plus solve of the
+    """The speed "limit" (:func:`cvxdual.p0.fast.limit`): the fastest factorisation plus solve of the
     stiffness, all pairs closed, among the installed backends."""
     from .. import assemble, discretize, fast
     t0 = time.perf_counter()

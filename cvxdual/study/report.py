@@ -316,7 +316,7 @@ def markdown(df: pd.DataFrame, study, out_name: str) -> str:
 
 def write_outputs(df: pd.DataFrame, study, out: str | Path) -> list[Path]:
     """Write ``NAME.csv``, ``NAME_h.png``, ``NAME_time.png`` and ``NAME.md`` to ``out``."""
-    from ..output import prepare_dir
+    from ..outputs.output_set import prepare_dir
     out = prepare_dir(out)
     name = study.name
     cfg = {"plots": True, **(study.report or {})}

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..norms import VOIGT_WEIGHT
+from ..p0.norms import VOIGT_WEIGHT
 from ..validate import one_line
 from .cache import Cache
 from .cases import (
@@ -64,7 +64,7 @@ def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, wo
     else:
         root = Path(cache).resolve()  # content keys: one directory serves every study (shared references)
     try:
-        from ..output import check_writable
+        from ..outputs.output_set import check_writable
         for d in (root, root / "rows", root / "arrays"):  # the cache's layout: refused before any case runs
             check_writable(d, "the study cache", "--cache")
         if out is not None:

@@ -181,7 +181,7 @@ def _fixed_overrides(v, where: str) -> list[tuple[str, object]]:
     """Fixed overrides: a nested table, or a list of them (applied in order), or "a.b=1" strings."""
     if v is None:
         return []
-    from ..scenefile import parse_assignment
+    from ..scene.scenefile import parse_assignment
     items = v if isinstance(v, (list, tuple)) else [v]
     out = []
     for o in items:
@@ -370,7 +370,7 @@ def _reference(v, levels: list[int], where: str) -> Reference:
 
 
 def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> list[Case]:
-    from ..scenefile import builtin_names
+    from ..scene.scenefile import builtin_names
     w = f"{where}" if where else "(top level)"
     scenes = _list(d.get("scenes", []) or [], "scenes", w) if d.get("scenes") else []
     if not scenes:

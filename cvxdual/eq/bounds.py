@@ -1,0 +1,326 @@
+"""Certification of equilibrium stresses: admissibility checks and two-sided bounds.
+
+For ``sigma`` in ``S_EP`` (exactly admissible, :mod:`cvxdual.eq.space`) and a displacement
+``v`` in ``K_eps`` (P1 on the mesh triangles, ``[v] = v''_y - v'_y <= eps`` at *every* ``x`` of
+the contact interval), the hypercircle identity (docs/equilibrium.md) reads
+
+    G = J(v) + L(u0) + S(sigma) = 1/2 ||sigma - C e(v)||_A^2 + int_a^b p (eps - [v]) dx >= 0,
+
+with ``p = -sigma_nn >= 0`` and, for admissible ``sigma``, ``L(u0) + S(sigma) =
+1/2 (A sigma, sigma) + int_a^b p eps dx`` (a *plus* sign: ``<sigma, e(u0)> - L(u0) =
+-int p [u0] = -int p eps``). Hence ``-L(u0) - S(sigma) <= J(u) <= J(v)`` and
+``||u - v||_a^2 + ||sigma - lam*||_A^2 <= 2 G``. Everything is integrated exactly: P1 mass
+matrices on sub-triangles, linear data on edges, Gauss on the contact edges (exact for
+polynomial gaps of degree <= 18, e.g. the parabola ``x^2 / 2R``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import SceneError
+from ..geometry.boundary import supported
+from ..geometry.quadrature import gauss01, triangle_rule
+from ..linalg.sparse import assemble_blocks
+from ..p0.norms import VOIGT_WEIGHT
+from .element import MASS0, bary_gradients, frame_rows, internal_rows, sub_vertices
+from .space import CONTACT, FIXED, N_GAUSS, EquilibriumSpace, outward_normals
+
+ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"
+
+
+# -- the constraints on vertex values (independent of the parametrisation) -------------------
+
+def _point_rows(t: np.ndarray, j: np.ndarray, a: np.ndarray, R: np.ndarray, n_T: int) -> sp.csr_matrix:
+    """Rows ``R (m, 3)`` applied to the Voigt values at vertex ``a`` of sub-triangle ``j`` of ``t``."""
+    cols = (27 * t + 9 * j + 3 * a)[:, None] + np.arange(3)[None, :]
+    return assemble_blocks(np.arange(len(t))[:, None], cols, R[:, None, :], (len(t), 27 * n_T))
+
+
+def _edge_dof_rows(space: EquilibriumSpace, raw: np.ndarray, t: np.ndarray, j: np.ndarray) -> sp.csr_matrix:
+    """Rows of raw edge dofs ``raw`` (``4 g + 2 e + k``) evaluated in the triangle ``(t, j)`` holding edge ``g``."""
+    g, e, k = raw // 4, (raw % 4) // 2, raw % 2
+    a = e ^ space.edges["flip"][t, j]
+    return _point_rows(t, j, a, frame_rows(space.edges["ng"][g])[np.arange(len(raw)), k], space.n_tri)
+
+
+def constraint_blocks(space: EquilibriumSpace) -> dict:
+    """Every admissibility condition as ``name -> (matrix on vertex values, rhs, sense)``,
+    assembled from the geometry alone (not from the reduced basis), to check a stress field:
+    internal and shared-edge traction jumps, ``h_T div sigma = -h_T F``, fixed boundary
+    tractions, zero tangential contact traction, action = reaction, ``sigma_nn <= 0``."""
+    ed, n_T = space.edges, space.n_tri
+    t12 = 12 * np.arange(n_T)[:, None] + np.arange(12)[None, :]
+    t27 = 27 * np.arange(n_T)[:, None] + np.arange(27)[None, :]
+    blk = assemble_blocks(t12, t27, internal_rows(space.X), (12 * n_T, 27 * n_T))
+    out = {"internal": (blk, np.zeros(12 * n_T), "=="), "divergence": (space.div, space.div_rhs, "==")}
+    order = np.argsort(ed["id"].ravel(), kind="stable")
+    inner = np.flatnonzero(ed["count"] == 2)
+    start = np.searchsorted(ed["id"].ravel()[order], inner)
+    (t1, j1), (t2, j2) = np.divmod(order[start], 3), np.divmod(order[start + 1], 3)
+    raw = (4 * inner[:, None] + np.arange(4)[None, :]).ravel()
+    rep = lambda v: np.repeat(v, 4)  # noqa: E731 - four dofs per edge
+    # the frame rows of both sides: both use n_g, so equal dofs mean equal tractions
+    jump = _edge_dof_rows(space, raw, rep(t1), rep(j1)) - _edge_dof_rows(space, raw, rep(t2), rep(j2))
+    out["shared"] = (jump, np.zeros(len(raw)), "==")
+    b = ed["boundary"]
+    braw = (4 * b[:, None] + np.arange(4)[None, :]).ravel()
+    bt, bj = np.repeat(ed["owner"][b, 0], 4), np.repeat(ed["owner"][b, 1], 4)
+    rows = _edge_dof_rows(space, braw, bt, bj)
+    is_contact_edge = np.repeat((space.kind[4 * b[:, None] + np.array([0, 2])] == CONTACT).any(1), 4)
+    fixed = space.kind[braw] == FIXED
+    for name, m in (("traction", fixed & ~is_contact_edge), ("contact_tangential", fixed & is_contact_edge)):
+        out[name] = (rows[m], space.z_fix[braw[m]], "==")
+    con = np.flatnonzero(space.kind[braw] == CONTACT)
+    col = space.Tm[braw[con]].indices  # the shared parameter of each contact dof
+    upper = space.body[bt[con]] == 0
+    iu, il = con[upper][np.argsort(col[upper])], con[~upper][np.argsort(col[~upper])]
+    out["action_reaction"] = (rows[iu] - rows[il], np.zeros(len(iu)), "==")
+    out["sign"] = (rows[il], np.zeros(len(il)), "<=")
+    return out
+
+
+def residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> dict:
+    """Largest violation of each block of :func:`constraint_blocks` by vertex stresses
+    ``sigma`` (any shape holding ``27 n_T`` values), relative to the stress scale."""
+    blocks = constraint_blocks(space) if blocks is None else blocks
+    s = np.asarray(sigma, float).reshape(-1)
+    out = {}
+    for name, (M, rhs, sense) in blocks.items():
+        r = M @ s - rhs
+        r = np.maximum(r, 0.0) if sense == "<=" else np.abs(r)
+        out[name] = float(r.max() / space.scales.stress) if len(r) else 0.0
+    return out
+
+
+
+
+# -- the displacement side ---------------------------------------------------------------
+
+def _quadratic_gap(space: EquilibriumSpace) -> bool:
+    """Flat faces plus a flat or parabolic gap profile: ``eps`` is a quadratic in ``x``."""
+    return space.scene.gap_profile.kind in ("flat", "parabola")
+
+
+def contact_slack(space: EquilibriumSpace, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``eps - [v]`` at the pairs ``(n_pairs,)`` and its minimum over each contact edge
+    ``(n_c,)``; exact (vertex of a parabola) when the gap is quadratic, else sampled densely
+    (then the last value, ``exact``, is false)."""
+    up, lo = space.mesh.pairs.T
+    x = space.mesh.pair_x
+    s = space.scene.gap_at(x) - (v[lo, 1] - v[up, 1])
+    s0, s1 = s[:-1], s[1:]
+    if _quadratic_gap(space):
+        # eps - linear = s0 (1 - u) + s1 u + kappa u (1 - u) on each edge, u in [0, 1]; a convex
+        # gap has kappa < 0, and then the minimum can lie between the pairs
+        xm = 0.5 * (x[:-1] + x[1:])
+        eps = space.scene.gap_at
+        kappa = 4.0 * eps(xm) - 2.0 * (eps(x[:-1]) + eps(x[1:]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.clip(0.5 + (s1 - s0) / (2.0 * kappa), 0.0, 1.0)
+        u = np.where(kappa < 0, u, 0.0)
+        smin = np.minimum(np.minimum(s0, s1), s0 * (1 - u) + s1 * u + kappa * u * (1 - u))
+        return s, smin, True
+    u = np.linspace(0.0, 1.0, 401)
+    xs = x[:-1, None] + u[None, :] * np.diff(x)[:, None]
+    lin = (v[lo, 1] - v[up, 1])
+    rel = lin[:-1, None] * (1 - u) + lin[1:, None] * u
+    return s, (space.scene.gap_at(xs) - rel).min(1), False
+
+
+def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Make a P1 displacement ``u (n_nodes, 2)`` pointwise admissible on the whole contact
+    interval: ``[u]`` is linear between pairs, the convex gap lies *below* its chord, so
+    ``[u] = eps`` at two pairs means ``[u] > eps`` in between. On every contact edge with
+    ``min (eps - [u]) < margin`` the lower face nodes of the edge are lowered (the upper ones
+    raised if the lower are supported) by the deficit; a node takes the larger shift of its two
+    edges. Supports are untouched, so the result stays in ``V``."""
+    v = np.array(u, float).reshape(-1, 2)
+    _, smin, exact = contact_slack(space, v)
+    sc = space.scales
+    margin = 1e-13 * max(float(np.abs(space.scene.gap_at(space.mesh.pair_x)).max()),
+                         float(np.abs(v).max()), sc.stress * sc.length / sc.modulus)
+    need = np.maximum(margin - smin, 0.0)
+    need[smin >= margin] = 0.0
+    shift = np.zeros(len(space.mesh.pairs))
+    shift[:-1] = need
+    shift[1:] = np.maximum(shift[1:], need)
+    fixed = supported(space.mesh)
+    up, lo = space.mesh.pairs.T
+    on_lower = ~fixed[lo, 1]
+    if np.any((shift > 0) & fixed[lo, 1] & fixed[up, 1]):
+        raise SceneError("a contact pair has both y displacements supported; supports must not act on the contact")
+    v[lo[on_lower], 1] -= shift[on_lower]
+    v[up[~on_lower], 1] += shift[~on_lower]
+    _, smin2, _ = contact_slack(space, v)
+    return v, {"max_shift": float(shift.max(initial=0.0)), "n_shifted": int(np.sum(shift > 0)),
+               "min_slack_before": float(smin.min()), "min_slack": float(smin2.min()), "exact_min": exact,
+               "support_violation": float(np.abs(v[fixed]).max(initial=0.0))}
+
+
+def strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
+    """Engineering strains ``(e11, e22, 2 e12)`` ``(n_T, 3)`` of a P1 displacement ``v (n_nodes, 2)``."""
+    g, _ = bary_gradients(space.X)  # (n_T, 3, 2)
+    vt = v[space.mesh.triangles()]  # (n_T, 3, 2)
+    du = np.einsum("tai,taj->tij", vt, g)  # du_i/dx_j
+    return np.stack([du[:, 0, 0], du[:, 1, 1], du[:, 0, 1] + du[:, 1, 0]], 1)
+
+
+def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
+    """``L(v)`` for P1 ``v``: body forces (centroid rule, exact for linear ``v``) and the fixed
+    boundary tractions of the space (linear per edge; for linear ``v`` their work equals that of
+    the unprojected data, the L2 projection being exact against linears)."""
+    _, area = bary_gradients(space.X)
+    F = np.array([b.body_force for b in space.scene.bodies])[space.body]
+    work = float(np.sum(area * np.einsum("tk,tk->t", F, v[space.mesh.triangles()].mean(1))))
+    ed = space.edges
+    b = ed["boundary"]
+    n_out, s_o = outward_normals(ed, space.X, space.mesh.points, b)
+    tg = np.stack([-ed["ng"][b, 1], ed["ng"][b, 0]], 1)
+    t = []
+    for e in range(2):  # traction at the global ends from the fixed dofs (free ones are 0 in z_fix)
+        dn, dt = space.z_fix[4 * b + 2 * e], space.z_fix[4 * b + 2 * e + 1]
+        t.append(dn[:, None] * n_out + (s_o * dt)[:, None] * tg)
+    v0, v1 = v[ed["lo"][b]], v[ed["hi"][b]]
+    ell = ed["length"][b] / 6.0
+    work += float(np.sum(ell * (np.einsum("bi,bi->b", t[0], 2 * v0 + v1) + np.einsum("bi,bi->b", t[1], v0 + 2 * v1))))
+    return work
+
+
+def primal_energy(space: EquilibriumSpace, v: np.ndarray) -> float:
+    """``J(v) = 1/2 a(v, v) - L(v)``."""
+    e = strains(space, v)
+    _, area = bary_gradients(space.X)
+    C = np.stack([b.material.stiffness for b in space.scene.bodies])[space.body]
+    return 0.5 * float(np.sum(area * np.einsum("ti,tij,tj->t", e, C, e))) - load_work(space, v)
+
+
+# -- the bounds ------------------------------------------------------------------------------
+
+def contact_tractions(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> np.ndarray:
+    """``sigma_nn`` at both ends of each contact edge ``(n_c, 2)``, read from the lower face."""
+    blocks = constraint_blocks(space) if blocks is None else blocks
+    return (blocks["sign"][0] @ np.asarray(sigma, float).reshape(-1)).reshape(-1, 2)
+
+
+def _contact_integrals(space: EquilibriumSpace, p: np.ndarray, v: np.ndarray | None) -> np.ndarray:
+    """``int p eps`` (``v`` None) or ``int p (eps - [v])`` per contact edge, Gauss ``N_GAUSS``."""
+    u, w = gauss01(N_GAUSS)
+    x0, x1 = space.contact_x[:, :1], space.contact_x[:, 1:]
+    f = space.scene.gap_at(x0 + u[None, :] * (x1 - x0))
+    if v is not None:
+        up, lo = space.mesh.pairs.T
+        jump = v[lo, 1] - v[up, 1]
+        f = f - (jump[:-1, None] * (1 - u) + jump[1:, None] * u)
+    pq = p[:, :1] * (1 - u) + p[:, 1:] * u
+    return (pq * f) @ w * (x1 - x0)[:, 0]
+
+
+def _sub_energy(space: EquilibriumSpace, d: np.ndarray) -> np.ndarray:
+    """``1/2 int d:A d`` on each sub-triangle ``(n_T, 3)`` for vertex values ``d (n_T, 3, 3, 3)``."""
+    _, area = bary_gradients(sub_vertices(space.X))
+    A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body]
+    return 0.5 * area * np.einsum("ab,tsai,tij,tsbj->ts", MASS0, d, A, d)
+
+
+def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray,
+                     fix: bool = True, blocks: dict | None = None) -> dict:
+    """Two-sided energy bounds and the error bound of ``sigma`` (vertex values, ``27 n_T``
+    numbers) and a P1 displacement (made pointwise admissible first unless ``fix`` is false).
+
+    Returns ``energy_upper = J(v)``, ``energy_lower = -L(u0) - S(sigma)``, ``gap`` (``G`` as
+    the sum of its non-negative terms), ``gap_identity`` (``J(v) + L(u0) + S(sigma)``),
+    ``error_bound = sqrt(2 G)``, ``contributions`` (``element (n_T,)``, ``sub (n_T, 3)``,
+    ``contact (n_c,)``), ``data_oscillation``, ``residuals``, ``guaranteed`` and ``reasons``.
+    """
+    blocks = constraint_blocks(space) if blocks is None else blocks
+    sig = np.asarray(sigma, float).reshape(space.n_tri, 3, 3, 3)
+    res = residuals(space, sig, blocks)
+    v, fixinfo = admissible_displacement(space, displacement) if fix else (np.asarray(displacement, float), {})
+    _, smin, exact_min = contact_slack(space, v)
+    p = -contact_tractions(space, sig, blocks)
+    C = np.stack([b.material.stiffness for b in space.scene.bodies])[space.body]
+    ce = np.einsum("tij,tj->ti", C, strains(space, v))
+    sub = _sub_energy(space, sig - ce[:, None, None, :])
+    contact = _contact_integrals(space, p, v)
+    comp = float(_sub_energy(space, sig).sum())
+    pe = float(_contact_integrals(space, p, None).sum())
+    J = primal_energy(space, v)
+    G = float(sub.sum() + contact.sum())
+    osc = data_oscillation(space)
+    reasons = []
+    if max(res.values()) > ADMISSIBLE_TOL:
+        reasons.append(f"sigma violates admissibility by {max(res.values()):.2g} (relative)")
+    if smin.min() < 0 or not exact_min:
+        reasons.append("v not shown pointwise admissible on the contact interval (gap not quadratic)")
+    if osc > 0:
+        reasons.append("tractions not linear on edges: bounds hold for the projected data; "
+                       f"data oscillation {osc:.3g} not included")
+    if fixinfo.get("support_violation", 0.0) > 0:
+        reasons.append("v does not vanish on the supports")
+    return {"energy_upper": J, "energy_lower": -(comp + pe), "gap": G, "gap_identity": J + comp + pe,
+            "error_bound": float(np.sqrt(2.0 * max(G, 0.0))), "complementary_energy": comp,
+            "contributions": {"element": sub.sum(1), "sub": sub, "contact": contact},
+            "data_oscillation": osc, "residuals": res, "displacement": v, "displacement_fix": fixinfo,
+            "guaranteed": not reasons, "reasons": reasons}
+
+
+def data_oscillation(space: EquilibriumSpace) -> float:
+    """``osc = (sum_e h_e ||P - Pi P||_e^2 / E_min)^(1/2)`` over traction edges: the part of the
+    prescribed traction that linear edge tractions cannot carry, in energy-norm units. By
+    orthogonality, ``|int (P - Pi P).w| <= ||P - Pi P||_e ||w - Pi w||_e``, and a trace/Korn
+    inequality would bound the last factor by ``c h_e^(1/2) ||w||_a``; ``c`` is not computed
+    here, so ``osc`` is an indicator and scenes with ``osc > 0`` are reported not guaranteed."""
+    te = space.traction_edges
+    if not len(te["ids"]):
+        return 0.0
+    h = space.edges["length"][te["ids"].astype(int)]
+    Emin = min(b.material.modulus for b in space.scene.bodies)
+    return float(np.sqrt(np.sum(h * te["osc2"]) / Emin))
+
+
+# -- comparison with an exact field, and output -----------------------------------------------
+
+def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray, exact, n: int = 6) -> dict:
+    """Errors against an exact stress ``exact.stress(body, points)``: ``l2_rel`` of ``sigma``
+    (``||.||_0`` with ``s:s = s11^2 + s22^2 + 2 s12^2``), ``stress_A = ||sigma - lam*||_A``,
+    ``displacement_a = ||lam* - C e(v)||_A = ||u - v||_a`` (``lam* = C e(u)``), ``combined`` (the
+    root sum of squares, which ``error_bound`` must dominate) and ``l2_rel`` of ``C e(v)``.
+    Tensor Gauss rule with ``n*n`` points per sub-triangle."""
+    rs, w = triangle_rule(n)
+    P = space.sub_points()  # (n_sub, 3, 2)
+    lam = np.stack([1 - rs.sum(1), rs[:, 0], rs[:, 1]], 1)  # (q, 3) barycentrics
+    pts = np.einsum("qa,sai->sqi", lam, P)
+    _, area = bary_gradients(P)
+    wq = 2.0 * area[:, None] * w[None, :]
+    sh = np.einsum("qa,sai->sqi", lam, np.asarray(sigma, float).reshape(-1, 3, 3))
+    body = np.repeat(space.body, 3)
+    C = np.stack([b.material.stiffness for b in space.scene.bodies])
+    ce = np.repeat(np.einsum("tij,tj->ti", C[space.body], strains(space, displacement)), 3, axis=0)
+    ref = np.empty_like(sh)
+    for k in range(2):
+        m = body == k
+        ref[m] = exact.stress(k, pts[m].reshape(-1, 2)).reshape(-1, len(w), 3)
+    A = np.linalg.inv(C)[body]
+    vw = VOIGT_WEIGHT
+
+    def sq(d, M=None):
+        return float(np.sum(wq * (np.einsum("sqi,i,sqi->sq", d, vw, d) if M is None
+                                  else np.einsum("sqi,sij,sqj->sq", d, M, d))))
+    ref0 = sq(ref)
+    e_s, e_u = sq(sh - ref, A), sq(ref - ce[:, None, :], A)
+    return {"l2": float(np.sqrt(sq(sh - ref))), "l2_rel": float(np.sqrt(sq(sh - ref) / ref0)),
+            "stress_A": float(np.sqrt(e_s)),
+            "displacement_a": float(np.sqrt(e_u)), "combined": float(np.sqrt(e_s + e_u)),
+            "reference_A": float(np.sqrt(sq(ref, A))),
+            "l2_rel_displacement": float(np.sqrt(sq(ref - ce[:, None, :]) / ref0))}
+
+
+def vtu_cells(space: EquilibriumSpace, sigma: np.ndarray) -> dict:
+    """Discontinuous P1 output: ``points (3 n_sub, 2)`` (each sub-triangle its own vertices),
+    ``cells (n_sub, 3)``, ``point_stress (3 n_sub, 3)`` Voigt, ``cell_body`` and ``cell_triangle``."""
+    n_sub = 3 * space.n_tri
+    return {"points": space.sub_points().reshape(-1, 2), "cells": np.arange(3 * n_sub).reshape(n_sub, 3),
+            "point_stress": np.asarray(sigma, float).reshape(-1, 3), "cell_body": np.repeat(space.body, 3),
+            "cell_triangle": np.repeat(np.arange(space.n_tri), 3)}

@@ -1,0 +1,489 @@
+"""An exactly admissible (equilibrium) stress space on flat-face scenes (docs/equilibrium.md).
+
+The Johnson-Mercier / Watwood-Hartz element: every mesh triangle ``T`` (a *macro* triangle)
+is split at its barycentre ``c`` into the sub-triangles ``T_i = (X_i, X_{i+1}, c)``; on each
+the stress is linear, given by its Voigt values ``(s11, s22, s12)`` at the three
+sub-triangle vertices (27 numbers per macro triangle, index ``9 i + 3 a + component``).
+
+Reduced parameters (docs/equilibrium.md): the 12 conditions "``sigma n`` continuous across
+the three internal edges" leave 15 parameters per macro triangle; we take as parameters
+the JM degrees of freedom, the traction ``sigma n_g`` (normal and tangential components in a
+frame ``n_g, t_g`` fixed per *global* edge) at both ends of each macro edge (12) plus three
+interior "bubbles" with zero boundary traction. Edge parameters are shared by the two
+triangles of an edge, so inter-element continuity holds by construction; the boundary
+conditions fix parameters (tractions, free sides, zero tangential contact traction) or keep
+them free (supports); the upper and lower contact faces share one normal-traction
+parameter per contact edge end (action = reaction), whose sign ``<= 0`` is a simple bound.
+Only ``div sigma + F = 0`` (6 rows per macro triangle) remains as an equality constraint.
+
+Notation of the paper (Tran Van Bon 1986) and docs/theory.md: ``lam``/``sigma`` the stress, ``S_EP``
+the statically admissible set, ``eps`` the initial gap, ``A = C^-1`` the compliance, ``F`` the
+body force, ``P`` the prescribed traction, ``p = -sigma_nn >= 0`` the contact pressure.
+Stress parameter vector ``y`` (physical units): ``sigma = S y + sigma0`` on the vertex values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import MeshError, SceneError, SolverError
+from ..geometry.boundary import supported
+from ..geometry.mesh import Mesh, build_mesh
+from ..geometry.quadrature import gauss01
+from ..geometry.rigid import candidates, check_balance
+from ..linalg.sparse import assemble_blocks
+from ..p0.assembly import Scales
+from ..scene.scene import Scene
+from .element import (
+    MASS0,
+    bary_gradients,
+    divergence_rows,
+    local_basis,
+    sub_vertices,
+    traction_rows,
+    unit,
+)
+
+N_GAUSS = 10  # per edge: tractions and gap products (degree 19; exact for the built-in data)
+FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
+
+
+@dataclass(frozen=True)
+class EquilibriumSpace:
+    """The JM stress space of a flat-face mesh and its admissibility data (physical units);
+    built complete by :meth:`from_mesh` and never changed afterwards.
+
+    Geometry: ``X (n_T, 3, 2)`` macro triangles, ``body (n_T,)``, ``basis (n_T, 27, 15)``.
+    Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) = ``Tm y + z_fix``;
+    vertex values ``sigma = P z = S y + sigma0`` (``S``: :attr:`stress_map`). ``div``: rows
+    ``h_T div sigma`` with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the ``y``
+    index of ``sigma_nn`` at both ends of each contact edge (``contact_x (n_c, 2)``).
+    """
+
+    mesh: Mesh
+    X: np.ndarray
+    body: np.ndarray
+    basis: np.ndarray
+    edges: dict
+    P: sp.csr_matrix
+    Tm: sp.csr_matrix
+    z_fix: np.ndarray
+    kind: np.ndarray
+    div: sp.csr_matrix
+    div_rhs: np.ndarray
+    contact_y: np.ndarray
+    contact_x: np.ndarray
+    traction_edges: dict
+    scales: Scales
+    load_imbalance: float
+
+    @classmethod
+    def from_mesh(cls, mesh: Mesh) -> "EquilibriumSpace":
+        check_flat(mesh.scene)
+        return build_space(mesh)
+
+    @classmethod
+    def from_scene(cls, scene: Scene, level: int | None = None) -> "EquilibriumSpace":
+        check_flat(scene)
+        return cls.from_mesh(build_mesh(scene, level))
+
+    @property
+    def scene(self) -> Scene:
+        return self.mesh.scene
+
+    @property
+    def n_tri(self) -> int:
+        return len(self.X)
+
+    @property
+    def n_y(self) -> int:
+        return self.Tm.shape[1]
+
+    @cached_property
+    def stress_map(self) -> sp.csr_matrix:
+        return (self.P @ self.Tm).tocsr()
+
+    @property
+    def sigma0(self) -> np.ndarray:
+        return self.P @ self.z_fix
+
+    def vertex_values(self, y: np.ndarray) -> np.ndarray:
+        """Vertex stresses ``(n_T, 27)`` of parameters ``y``."""
+        return (self.P @ (self.Tm @ y + self.z_fix)).reshape(self.n_tri, 27)
+
+    def stresses(self, y: np.ndarray) -> np.ndarray:
+        """``(n_sub, 3, 3)``: Voigt values at the vertices of sub-triangle ``3 t + i``."""
+        return self.vertex_values(y).reshape(3 * self.n_tri, 3, 3)
+
+    def sub_points(self) -> np.ndarray:
+        """``(n_sub, 3, 2)`` sub-triangle vertices, in the order of :meth:`stresses`."""
+        return sub_vertices(self.X).reshape(3 * self.n_tri, 3, 2)
+
+    def energy_matrix(self) -> sp.csr_matrix:
+        """``Q`` with ``1/2 sigma.Q sigma = 1/2 int sigma:A sigma`` on vertex values (exact P1 mass)."""
+        _, area = bary_gradients(sub_vertices(self.X))
+        A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]  # (n_T, 3, 3)
+        blk = area[:, :, None, None, None, None] * MASS0[None, None, :, None, :, None] * A[:, None, None, :, None, :]
+        idx = 9 * np.arange(3 * self.n_tri)[:, None] + np.arange(9)[None, :]
+        n = 27 * self.n_tri
+        return assemble_blocks(idx, idx, blk.reshape(3 * self.n_tri, 9, 9), (n, n))
+
+    def gap_weights(self) -> np.ndarray:
+        """``(n_c, 2)``: ``int phi_e eps dx`` of the two end hats of each contact edge, so that
+        ``int_a^b sigma_nn eps dx = sum w * sigma_nn`` (Gauss, exact for a parabolic gap)."""
+        u, w = gauss01(N_GAUSS)
+        x0, x1 = self.contact_x[:, :1], self.contact_x[:, 1:]
+        eps = self.scene.gap_at(x0 + u[None, :] * (x1 - x0)) * w[None, :] * (x1 - x0)
+        return np.stack([eps @ (1.0 - u), eps @ u], axis=1)
+
+
+def check_flat(scene: Scene) -> None:
+    """Refuse scenes with a curved face: the element needs straight macro triangles."""
+    curved = [b.name for b in scene.bodies if not b.face.is_flat()]
+    if curved:
+        raise SceneError(f"the equilibrium stress space needs flat faces, but body {curved[0]!r} has a curved "
+                         "face; use the P0 dual (cvxdual.solve, type 1/2 pieces) or flat faces with a gap profile")
+
+
+# -- building the space ------------------------------------------------------------------
+
+def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
+    """Global edges of the macro triangles: end nodes ``lo < hi``, unit normals ``ng`` (the
+    direction ``hi - lo`` turned clockwise), the edge of each local edge ``id (n_T, 3)`` (local
+    edge ``j`` runs ``X_j -> X_{j+1}``), whether it runs ``hi -> lo`` (``flip``) and the owner
+    ``(t, j)`` of every edge that has one triangle (the boundary)."""
+    a, b = tri, np.roll(tri, -1, axis=1)
+    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+    uniq, inv, count = np.unique(keys.ravel(), return_inverse=True, return_counts=True)
+    lo, hi = uniq // n_nodes, uniq % n_nodes
+    d = pts[hi] - pts[lo]
+    ng = unit(np.stack([d[:, 1], -d[:, 0]], 1))
+    bnd = np.flatnonzero(count == 1)
+    owner = np.full((len(uniq), 2), -1)
+    owner[inv, 0], owner[inv, 1] = np.repeat(np.arange(len(tri)), 3), np.tile(np.arange(3), len(tri))
+    return {"keys": uniq, "lo": lo, "hi": hi, "ng": ng, "id": inv.reshape(tri.shape), "flip": a > b,
+            "count": count, "boundary": bnd, "owner": owner, "length": np.linalg.norm(d, axis=1)}
+
+
+def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
+    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+    idx = np.searchsorted(edges["keys"], keys)
+    if np.any(edges["keys"][np.minimum(idx, len(edges["keys"]) - 1)] != keys):
+        raise MeshError("internal: a side edge is not an edge of the mesh")  # pragma: no cover
+    return idx
+
+
+def outward_normals(edges: dict, X: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals of boundary edges ``ids`` and ``s_o = n_g . n_out`` (+-1)."""
+    t = edges["owner"][ids, 0]
+    mid = 0.5 * (pts[edges["lo"][ids]] + pts[edges["hi"][ids]])
+    s_o = np.sign(np.einsum("ij,ij->i", mid - X[t].mean(1), edges["ng"][ids]))
+    return s_o[:, None] * edges["ng"][ids], s_o
+
+
+def part_edges(mesh: Mesh, edges: dict, k: int, part) -> tuple[np.ndarray, np.ndarray]:
+    """Edges (and their side nodes) of a boundary part: both ends in the part's interval
+    (x on face/far, y on left/right), the same selection as the P0 assembly."""
+    nodes = mesh.bodies[k].side_nodes(part.on)
+    inside = np.ones(len(nodes), bool)
+    if part.interval is not None:
+        lo, hi = part.interval
+        c = mesh.points[nodes, 0 if part.on in ("face", "far") else 1]
+        tol = 1e-12 * (abs(lo) + abs(hi) + 1.0)  # interval ends are nodes: only rounding separates them
+        inside = (c >= lo - tol) & (c <= hi + tol)
+    keep = inside[:-1] & inside[1:]
+    return edge_ids(edges, nodes[:-1][keep], nodes[1:][keep], mesh.n_nodes), nodes[inside]
+
+
+def project_traction(mesh: Mesh, edges: dict, k: int, ids: np.ndarray, n_out: np.ndarray, traction,
+                     exact) -> tuple[np.ndarray, np.ndarray]:
+    """L2 projection of a traction onto linear functions on each edge: end values ``(m, 2, 2)``
+    (global end order ``lo, hi``) and the squared oscillation ``||P - Pi P||^2`` per edge."""
+    u, w = gauss01(N_GAUSS)
+    pa, pb = mesh.points[edges["lo"][ids]], mesh.points[edges["hi"][ids]]
+    ell = edges["length"][ids]
+    if traction.kind == "uniform":
+        val = np.broadcast_to(np.array(traction.value, float), (len(ids), 2))
+        return np.stack([val, val], 1).copy(), np.zeros(len(ids))
+    if exact is None:
+        raise SceneError(f"body {mesh.scene.bodies[k].name!r}: traction 'exact' needs an [exact] field")
+    x = pa[:, None, :] + u[None, :, None] * (pb - pa)[:, None, :]
+    s = exact.stress(k, x.reshape(-1, 2)).reshape(len(ids), len(u), 3)
+    P = np.einsum("mij,mgj->mgi", traction_rows(n_out), s)
+    b0 = np.einsum("g,g,mgi->mi", w, 1 - u, P) * ell[:, None]
+    b1 = np.einsum("g,g,mgi->mi", w, u, P) * ell[:, None]
+    c0, c1 = (2 * (2 * b0 - b1)) / ell[:, None], (2 * (2 * b1 - b0)) / ell[:, None]
+    res = P - (c0[:, None, :] * (1 - u)[None, :, None] + c1[:, None, :] * u[None, :, None])
+    return np.stack([c0, c1], 1), ell * np.einsum("g,mgi->m", w, res**2)
+
+
+def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact) -> dict:
+    """Kind (free, fixed, contact) and fixed value of every raw edge dof ``4 g + 2 e + k``
+    (``e`` the global end, ``k`` 0 normal, 1 tangential): boundary edges default to traction
+    free; traction parts fix their projected data; supports free the reaction components;
+    contact edges fix a zero tangential traction and share one normal parameter per end."""
+    n_raw = 4 * len(edges["keys"]) + 3 * len(X)
+    kind, val = np.full(n_raw, FREE), np.zeros(n_raw)
+    bnd = edges["boundary"]
+    kind[(4 * bnd[:, None] + np.arange(4)).ravel()] = FIXED
+    trac = {"ids": [], "c": [], "osc2": [], "body": []}
+    for k, bm in enumerate(mesh.bodies):
+        for part in bm.body.boundary:
+            ids, _ = part_edges(mesh, edges, k, part)
+            n_out, s_o = outward_normals(edges, X, mesh.points, ids)
+            if part.kind == "traction":
+                c, osc2 = project_traction(mesh, edges, k, ids, n_out, part.traction, exact)
+                tg = np.stack([-edges["ng"][ids, 1], edges["ng"][ids, 0]], 1)
+                for e in range(2):
+                    val[4 * ids + 2 * e] += np.einsum("mi,mi->m", c[:, e], n_out)
+                    val[4 * ids + 2 * e + 1] += s_o * np.einsum("mi,mi->m", c[:, e], tg)
+                for key, v in (("ids", ids), ("c", c), ("osc2", osc2), ("body", np.full(len(ids), k))):
+                    trac[key].append(v)
+            else:  # clamped frees both components, sliding the normal one (axis-aligned sides)
+                comps = (0, 1) if part.kind == "clamped" else (0,)
+                for e in range(2):
+                    for comp in comps:
+                        kind[4 * ids + 2 * e + comp] = FREE
+    pairs = mesh.pairs
+    up = edge_ids(edges, pairs[:-1, 0], pairs[1:, 0], mesh.n_nodes)
+    lo = edge_ids(edges, pairs[:-1, 1], pairs[1:, 1], mesh.n_nodes)
+    cidx = np.full(n_raw, -1)
+    for ids, col in ((up, 0), (lo, 1)):
+        for xend in range(2):
+            e = (edges["hi"][ids] == pairs[xend:len(pairs) - 1 + xend, col]).astype(int)
+            kind[4 * ids + 2 * e], kind[4 * ids + 2 * e + 1] = CONTACT, FIXED
+            val[4 * ids + 2 * e] = val[4 * ids + 2 * e + 1] = 0.0
+            cidx[4 * ids + 2 * e] = 2 * np.arange(len(ids)) + xend
+    cat = {key: np.concatenate(v) if v else np.empty(0) for key, v in trac.items()}
+    cat["c"] = cat["c"].reshape(-1, 2, 2)
+    return {"kind": kind, "value": val, "contact": cidx, "traction": cat,
+            "contact_x": np.stack([mesh.pair_x[:-1], mesh.pair_x[1:]], 1)}
+
+
+def vertex_map(basis: np.ndarray, edges: dict, n_raw: int) -> sp.csr_matrix:
+    """``P``: vertex values ``(27 n_T)`` of the raw parameters (edge dofs shared, bubbles own)."""
+    n_T = len(basis)
+    e = np.arange(2)[None, None, :, None] ^ edges["flip"][:, :, None, None]  # global end of local end
+    edof = 4 * edges["id"][:, :, None, None] + 2 * e + np.arange(2)[None, None, None, :]
+    dofmap = np.concatenate([edof.reshape(n_T, 12), 4 * len(edges["keys"]) + 3 * np.arange(n_T)[:, None]
+                             + np.arange(3)[None, :]], axis=1)
+    rows = 27 * np.arange(n_T)[:, None] + np.arange(27)[None, :]
+    return assemble_blocks(rows, dofmap, basis, (27 * n_T, n_raw))
+
+
+def build_space(mesh: Mesh) -> EquilibriumSpace:
+    """Assemble the space of ``mesh`` (see :class:`EquilibriumSpace`); balance the loads."""
+    from ..reference.exact import exact_field
+    scene = mesh.scene
+    tri = mesh.triangles()
+    X = mesh.points[tri]
+    body = mesh.triangle_body()
+    edges = mesh_edges(tri, mesh.points, mesh.n_nodes)
+    ng_local = edges["ng"][edges["id"]]  # (n_T, 3, 2)
+    basis = local_basis(X, ng_local)
+    cl = classify(mesh, edges, X, exact_field(scene))
+    kind = cl["kind"]
+    free = np.flatnonzero(kind == FREE)
+    n_c = len(mesh.pairs) - 1
+    ycol = np.full(len(kind), -1)
+    ycol[free] = np.arange(len(free))
+    con = kind == CONTACT
+    ycol[con] = len(free) + cl["contact"][con]
+    live = ycol >= 0
+    Tm = sp.csr_matrix((np.ones(int(live.sum())), (np.flatnonzero(live), ycol[live])),
+                       shape=(len(kind), len(free) + 2 * n_c))
+    z_fix = np.where(kind == FIXED, cl["value"], 0.0)
+    rows, _, h = divergence_rows(X)
+    n_T = len(X)
+    div = assemble_blocks(6 * np.arange(n_T)[:, None] + np.arange(6)[None, :],
+                          27 * np.arange(n_T)[:, None] + np.arange(27)[None, :], rows, (6 * n_T, 27 * n_T))
+    F = np.array([b.body_force for b in scene.bodies])[body]
+    div_rhs = -(h[:, None, None] * F[:, None, :]).repeat(3, axis=1).reshape(-1)
+    contact_y = len(free) + np.arange(2 * n_c).reshape(n_c, 2)
+    space = EquilibriumSpace(mesh=mesh, X=X, body=body, basis=basis, edges=edges,
+                             P=vertex_map(basis, edges, len(kind)), Tm=Tm, z_fix=z_fix, kind=kind,
+                             div=div, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],
+                             traction_edges=cl["traction"], scales=Scales(1.0, 1.0, 1.0), load_imbalance=0.0)
+    z_fix, imbalance = balance_loads(space)
+    space = replace(space, z_fix=z_fix, load_imbalance=imbalance)
+    return replace(space, scales=make_scales(space))
+
+
+# -- rigid motions and load balance -------------------------------------------------------
+
+def node_body(mesh: Mesh) -> np.ndarray:
+    return np.concatenate([np.full(bm.n_nodes, k) for k, bm in enumerate(mesh.bodies)])
+
+
+def rigid_candidates(mesh: Mesh) -> np.ndarray:
+    """``(n_nodes, 2, 6)``: translations and rotation of each body (:func:`cvxdual.geometry.rigid.candidates`)."""
+    return candidates(mesh).reshape(mesh.n_nodes, 2, 6)
+
+
+def _null(rows: np.ndarray, n: int) -> np.ndarray:
+    if len(rows) == 0:
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(rows, full_matrices=True)
+    rank = int(np.sum(s > 1e-9 * max(s[0], 1e-300)))
+    return vt[rank:].T
+
+
+def rigid_modes(mesh: Mesh, joint: bool) -> np.ndarray:
+    """Rigid motions allowed by the supports, ``(n_nodes, 2, m)``. ``joint``: of both bodies
+    together keeping ``[r_y] = 0`` on the contact pairs (the floating modes, on which the loads
+    must balance); otherwise of each body alone (with its contact tractions held fixed)."""
+    R = rigid_candidates(mesh)
+    fixed = supported(mesh)
+    rows = R[fixed]  # (n_fixed, 6)
+    if joint:
+        up, lo = mesh.pairs.T
+        coef = _null(np.concatenate([rows, R[lo, 1] - R[up, 1]]), 6)
+    else:
+        nb = node_body(mesh)
+        blocks = []
+        for k in range(2):
+            rk = R[fixed & (nb == k)[:, None]][:, 3 * k: 3 * k + 3]
+            nk = _null(rk, 3)
+            full = np.zeros((6, nk.shape[1]))
+            full[3 * k: 3 * k + 3] = nk
+            blocks.append(full)
+        coef = np.concatenate(blocks, axis=1)
+    return np.einsum("nij,jm->nim", R, coef)
+
+
+def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For displacements ``r (n_nodes, 2, m)`` linear on each triangle: the boundary work
+    ``int_bnd (sigma n).r ds`` as rows ``W (m, 27 n_T)`` on vertex values (exact: linear times
+    linear), and the body-force work ``int F.r`` ``(m,)`` with its absolute size ``(m,)``."""
+    ed, tri = space.edges, space.mesh.triangles()
+    b = ed["boundary"]
+    t, j = ed["owner"][b, 0], ed["owner"][b, 1]
+    n_out, _ = outward_normals(ed, space.X, space.mesh.points, b)
+    T = traction_rows(n_out)  # (nb, 2, 3)
+    r0, r1 = r[tri[t, j]], r[tri[t, (j + 1) % 3]]  # (nb, 2, m)
+    ell = ed["length"][b][:, None, None] / 6.0
+    c0 = ell * np.einsum("bki,bkm->bim", T, 2 * r0 + r1)
+    c1 = ell * np.einsum("bki,bkm->bim", T, r0 + 2 * r1)
+    W = np.zeros((r.shape[2], 27 * space.n_tri))
+    base = 27 * t + 9 * j
+    for a, cv in ((0, c0), (1, c1)):
+        cols = base[:, None] + 3 * a + np.arange(3)[None, :]
+        np.add.at(W.T, cols.ravel(), cv.reshape(-1, r.shape[2]))
+    _, area = bary_gradients(space.X)
+    F = np.array([bd.body_force for bd in space.scene.bodies])[space.body]
+    rm = r[tri].mean(1)  # (n_T, 2, m): r at the centroid
+    terms = area[:, None] * np.einsum("tk,tkm->tm", F, rm)
+    return W, terms.sum(0), np.abs(terms).sum(0)
+
+
+def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
+    """Check the data on the floating modes; return the fixed parameters with a rounding-level
+    imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
+    r = rigid_modes(space.mesh, joint=True)
+    if r.shape[2] == 0:
+        return space.z_fix, 0.0
+    W, bf, bf_abs = work_rows(space, r)
+    sigma0 = space.sigma0
+    work = W @ sigma0 + bf
+    imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
+    loaded = np.flatnonzero(space.z_fix != 0)
+    if len(loaded) == 0:
+        return space.z_fix, imbalance
+    G = (sp.csr_matrix(W) @ space.P)[:, loaded].toarray()
+    z_fix = space.z_fix.copy()
+    z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
+    return z_fix, imbalance
+
+
+def make_scales(space: EquilibriumSpace) -> Scales:
+    """``L`` the scene's length, ``E`` the stiffest body's uniaxial modulus, ``s`` the load per
+    unit length (tractions and body forces) or the stress of an interference fit."""
+    scene = space.scene
+    L = scene.length_scale
+    E = max(b.material.modulus for b in scene.bodies)
+    te = space.traction_edges
+    force = float(np.sum(space.edges["length"][te["ids"].astype(int)]
+                         * 0.5 * np.linalg.norm(te["c"], axis=2).sum(1))) if len(te["ids"]) else 0.0
+    _, area = bary_gradients(space.X)
+    F = np.array([b.body_force for b in scene.bodies])[space.body]
+    force += float(np.sum(area * np.linalg.norm(F, axis=1)))
+    s = max(force / L, E * max(0.0, -float(np.min(scene.gap_at(space.mesh.pair_x)))) / L)
+    return Scales(L, E, s if s > 0 else E * 1e-6)
+
+
+# -- exactness post-step -------------------------------------------------------------------
+
+def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, float]:
+    """Clip the contact parameters to ``sigma_nn <= 0`` and make each body's own rigid-motion
+    balance exact by the change ``dp = |p| * (a^T lam)`` (least change weighted by ``|p|``):
+    zero parameters stay zero and the others keep their sign (relative changes are at the
+    solver's tolerance). Returns the new ``y`` and the largest relative change."""
+    y = y.copy()
+    ci = space.contact_y.ravel()
+    p = np.minimum(y[ci], 0.0)
+    y[ci] = p
+    r = rigid_modes(space.mesh, joint=False)
+    if r.shape[2] == 0:
+        return y, 0.0
+    W, bf, _ = work_rows(space, r)
+    WS = sp.csr_matrix(W) @ space.stress_map
+    a = WS[:, ci].toarray()
+    resid = WS @ y + W @ space.sigma0 + bf  # should be zero: each body in balance
+    D = np.abs(p)
+    lam = np.linalg.lstsq((a * D) @ a.T, -resid, rcond=None)[0]
+    dp = D * (a.T @ lam)
+    rel = float(np.max(np.abs(dp) / np.where(D > 0, D, 1.0))) if len(dp) else 0.0
+    if rel >= 1.0:
+        raise SolverError(f"the solver's contact tractions are too far from balance to be corrected "
+                          f"(relative change {rel:.2g}); tighten the solver tolerances")
+    y[ci] = np.minimum(p + dp, 0.0)  # rel < 1 keeps every sign; the min only guards rounding
+    return y, rel
+
+
+def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30) -> tuple[np.ndarray, int]:
+    """Least-change correction of the non-contact parameters so that ``div sigma + F = 0``
+    holds to rounding, contact parameters held fixed: iterated Tikhonov
+    ``dy = B^T (B B^T + mu I)^-1 r`` (one sparse factorisation). ``B`` has dependent rows
+    (one per rigid motion of a body); they are consistent after :func:`balance_contact`, and
+    the ``mu`` term only moves the multipliers along them, which ``B^T`` annihilates."""
+    from ..linalg.factor import SPDFactor
+    ci = space.contact_y.ravel()
+    rest = np.setdiff1d(np.arange(space.n_y), ci)
+    B = (space.div @ space.stress_map).tocsc()
+    Br = B[:, rest].tocsr()
+    rhs = space.div_rhs - space.div @ space.sigma0 - B[:, ci] @ y[ci]
+    BB = (Br @ Br.T).tocsc()
+    # Each step shrinks a residual component of eigenvalue lam by mu / (lam + mu): mu must be far
+    # below the small eigenvalues of tiny elements (1e-10 left 1e-7 residuals on a mesh with a
+    # 0.02-wide column), and only large enough to factorise along the dependent rows.
+    mu = 1e-14 * float(BB.diagonal().max())
+    # SPD (mu > 0): a sparse Cholesky (cvxdual.linalg.factor), 10x SuperLU's LU at level 4
+    lu = SPDFactor((BB + mu * sp.identity(BB.shape[0], format="csr")).tocsr())
+    y = y.copy()
+    x = y[rest]
+    tol = 1e-15 * max(float(np.abs(rhs).max()), space.scales.stress)
+    done, last = 0, np.inf
+    while done < iters:
+        r = rhs - Br @ x
+        size = float(np.abs(r).max())
+        if size <= tol or size > 0.5 * last:  # at rounding, or stalled there
+            break
+        x = x + Br.T @ lu.solve(r)
+        done, last = done + 1, size
+    lu.close()
+    y[rest] = x
+    return y, done
+
+
+def make_exact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The post-step: clip and balance the contact tractions, then project onto the
+    equilibrium equations. Everything else (traction continuity, boundary data, zero
+    tangential contact traction, action = reaction) holds by the parametrisation."""
+    y1, rel = balance_contact(space, y)
+    y2, iters = project_equilibrium(space, y1)
+    change = float(np.abs(y2 - y).max() / space.scales.stress)
+    return y2, {"contact_change": rel, "projection_iterations": iters, "max_change": change}

@@ -1,0 +1,244 @@
+"""Curves ``y = f(x)``: contact arcs of the bodies and gap profiles.
+
+A closed set of kinds, each a frozen dataclass that knows its value, slope, curvature, exact
+integral and inflexion points, all vectorised over ``x``. Scene files name a kind and give its
+numbers; nothing is ever evaluated from a string.
+
+=============  ==========================================================================
+kind           curve
+=============  ==========================================================================
+``flat``       ``y = y0``
+``parabola``   ``y = y0 + (x - xc)^2 / (2 R)`` (``R < 0`` opens downward)
+``circle``     ``y = yc - sqrt(R^2 - (x - xc)^2)`` (``branch = "lower"``, convex) or
+               ``y = yc + sqrt(...)`` (``branch = "upper"``, concave)
+``cosine``     ``y = y0 + amplitude * cos(2 pi (x - x0) / wavelength)``
+=============  ==========================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import ClassVar
+
+import numpy as np
+
+from ..errors import SceneError
+from ..validate import number, short, table
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Base class; subclasses define ``kind`` and the evaluation methods."""
+
+    kind: ClassVar[str] = ""
+
+    def __post_init__(self):
+        for f in fields(self):
+            object.__setattr__(self, f.name, number(getattr(self, f.name), f"{self.kind} profile: '{f.name}'"))
+
+    def value(self, x):
+        raise NotImplementedError
+
+    def slope(self, x):
+        raise NotImplementedError
+
+    def curvature(self, x):
+        """Second derivative ``f''(x)``."""
+        raise NotImplementedError
+
+    def antiderivative(self, x):
+        """Some ``F`` with ``F' = f`` (exact, used for areas)."""
+        raise NotImplementedError
+
+    def integral(self, x0, x1):
+        """``int_{x0}^{x1} f dx``, exactly (vectorised)."""
+        return self.antiderivative(np.asarray(x1, float)) - self.antiderivative(np.asarray(x0, float))
+
+    def inflexions(self, x0: float, x1: float) -> np.ndarray:
+        """Abscissae in ``(x0, x1)`` where the curvature changes sign."""
+        return np.empty(0)
+
+    def count_inflexions(self, x0: float, x1: float) -> float:
+        """How many :meth:`inflexions` there are at most, without listing them (a hostile
+        profile may have billions); the mesh size estimate counts with it."""
+        return float(len(self.inflexions(x0, x1)))
+
+    def domain(self) -> tuple[float, float]:
+        """Interval of ``x`` on which the curve is defined as a graph."""
+        return (-np.inf, np.inf)
+
+    def is_flat(self) -> bool:
+        return False
+
+
+@dataclass(frozen=True)
+class Flat(Profile):
+    kind: ClassVar[str] = "flat"
+    y0: float = 0.0
+
+    def value(self, x):
+        return np.full(np.shape(x), self.y0, dtype=float)
+
+    def slope(self, x):
+        return np.zeros(np.shape(x))
+
+    def curvature(self, x):
+        return np.zeros(np.shape(x))
+
+    def antiderivative(self, x):
+        return self.y0 * np.asarray(x, float)
+
+    def is_flat(self) -> bool:
+        return True
+
+
+@dataclass(frozen=True)
+class Parabola(Profile):
+    kind: ClassVar[str] = "parabola"
+    R: float = 1.0
+    xc: float = 0.0
+    y0: float = 0.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.R == 0:
+            raise SceneError("parabola profile: R must be non-zero (negative R opens downward)")
+
+    def value(self, x):
+        u = np.asarray(x, float) - self.xc
+        return self.y0 + u * u / (2 * self.R)
+
+    def slope(self, x):
+        return (np.asarray(x, float) - self.xc) / self.R
+
+    def curvature(self, x):
+        return np.full(np.shape(x), 1.0 / self.R)
+
+    def antiderivative(self, x):
+        u = np.asarray(x, float) - self.xc
+        return self.y0 * u + u**3 / (6 * self.R)
+
+
+@dataclass(frozen=True)
+class Circle(Profile):
+    kind: ClassVar[str] = "circle"
+    R: float = 1.0
+    xc: float = 0.0
+    yc: float = 1.0
+    branch: ClassVar[str] = "lower"
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.R <= 0:
+            raise SceneError("circle profile: radius R must be positive")
+
+    @property
+    def _s(self) -> float:
+        return -1.0 if self.branch == "lower" else 1.0
+
+    def _root(self, x):
+        u = np.asarray(x, float) - self.xc
+        return u, np.sqrt(np.maximum(self.R**2 - u * u, 0.0))
+
+    def value(self, x):
+        _, w = self._root(x)
+        return self.yc + self._s * w
+
+    def slope(self, x):
+        u, w = self._root(x)
+        return -self._s * u / w
+
+    def curvature(self, x):
+        _, w = self._root(x)
+        return -self._s * self.R**2 / w**3
+
+    def antiderivative(self, x):
+        u, w = self._root(x)
+        return self.yc * u + self._s * 0.5 * (u * w + self.R**2 * np.arcsin(np.clip(u / self.R, -1, 1)))
+
+    def domain(self) -> tuple[float, float]:
+        return (self.xc - self.R, self.xc + self.R)
+
+
+@dataclass(frozen=True)
+class LowerCircle(Circle):
+    """Lower half of a circle: convex (e.g. the bottom of a cylinder)."""
+
+    branch: ClassVar[str] = "lower"
+
+
+@dataclass(frozen=True)
+class UpperCircle(Circle):
+    """Upper half of a circle: concave (e.g. the top of a cylinder, or a groove seen from above)."""
+
+    branch: ClassVar[str] = "upper"
+
+
+@dataclass(frozen=True)
+class Cosine(Profile):
+    kind: ClassVar[str] = "cosine"
+    amplitude: float = 0.0
+    wavelength: float = 1.0
+    x0: float = 0.0
+    y0: float = 0.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.wavelength <= 0:
+            raise SceneError("cosine profile: wavelength must be positive")
+
+    @property
+    def _k(self) -> float:
+        return 2 * np.pi / self.wavelength
+
+    def value(self, x):
+        return self.y0 + self.amplitude * np.cos(self._k * (np.asarray(x, float) - self.x0))
+
+    def slope(self, x):
+        return -self.amplitude * self._k * np.sin(self._k * (np.asarray(x, float) - self.x0))
+
+    def curvature(self, x):
+        return -self.amplitude * self._k**2 * np.cos(self._k * (np.asarray(x, float) - self.x0))
+
+    def antiderivative(self, x):
+        x = np.asarray(x, float)
+        return self.y0 * x + self.amplitude / self._k * np.sin(self._k * (x - self.x0))
+
+    def count_inflexions(self, x0: float, x1: float) -> float:
+        return 0.0 if self.amplitude == 0 else max(0.0, np.floor(2 * (x1 - x0) / self.wavelength) + 1)
+
+    def inflexions(self, x0: float, x1: float) -> np.ndarray:
+        if self.amplitude == 0:
+            return np.empty(0)
+        # cos vanishes at x0 + wavelength (1/4 + m/2)
+        q = self.wavelength / 2
+        m = np.arange(np.ceil((x0 - self.x0 - q / 2) / q), np.floor((x1 - self.x0 - q / 2) / q) + 1)
+        xs = self.x0 + q / 2 + m * q
+        return xs[(xs > x0) & (xs < x1)]
+
+
+PROFILE_KINDS: dict[str, type[Profile]] = {
+    "flat": Flat,
+    "parabola": Parabola,
+    "circle": Circle,
+    "cosine": Cosine,
+}
+
+
+def profile_from_dict(d: dict, where: str) -> Profile:
+    """Build a profile from a scene-file table such as ``{kind = "parabola", R = 50}``."""
+    d = dict(table(d, where))
+    kind = d.pop("kind", None)
+    if not isinstance(kind, str) or kind not in PROFILE_KINDS:
+        raise SceneError(f"{where}: unknown profile kind {short(kind)}; choose one of {sorted(PROFILE_KINDS)}")
+    cls: type[Profile] = PROFILE_KINDS[kind]
+    if kind == "circle":
+        branch = d.pop("branch", "lower")
+        if branch not in ("lower", "upper"):
+            raise SceneError(f"{where}: circle branch must be 'lower' or 'upper', got {branch!r}")
+        cls = LowerCircle if branch == "lower" else UpperCircle
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise SceneError(f"{where}: unknown key(s) {unknown} for a {kind} profile; allowed: {sorted(names)}")
+    return cls(**d)

@@ -1,0 +1,383 @@
+"""The scene model: two bodies, their boundary parts, loads, the gap and the exact field.
+
+A body is the region between its contact *face* ``y = f(x)`` (a :mod:`~cvxdual.scene.profiles`
+curve) and a straight *far* side ``y = far``, for ``x`` in ``[x0, x1]``: the upper body
+(the paper's ``Omega'``) lies above its face, the lower body (``Omega''``) below. Its four
+sides are named ``face``, ``far``, ``left`` (``x = x0``) and ``right`` (``x = x1``).
+
+Boundary parts (a scene declares only those it has; undeclared boundary is traction free):
+
+- ``clamped``: ``u = 0`` (the paper's ``Gamma_u``);
+- ``sliding``: normal displacement zero, tangential traction zero (``Gamma_0``; axis-aligned
+  sides only: ``u_x = 0`` on ``left``/``right``, ``u_y = 0`` on ``far``);
+- ``traction``: a prescribed traction ``P`` (``Gamma_tau``): ``uniform`` (a constant vector)
+  or ``exact`` (``sigma* . n`` of the scene's exact field).
+
+The candidate contact interval ``[a, b]`` (``Gamma_K``) lies in both bodies' ``x`` ranges;
+the initial gap is ``eps(x) = f'(x) - f''(x) + g(x)`` with ``g`` an optional gap profile
+(flat faces with ``g(x) = x^2 / (2R)`` are the linearised Hertz geometry).
+
+Contact is frictionless unless the scene has a :class:`Friction`: Tresca friction with slip
+threshold ``g`` (a traction) on the whole candidate interval.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from ..errors import SceneError
+from ..validate import integer, number, pair, short, text
+from .materials import Material
+from .profiles import Flat, Profile
+
+SIDES = ("face", "far", "left", "right")
+MAX_INFLEXIONS = 1000  # of a face over its body
+PART_KINDS = ("clamped", "sliding", "traction")
+POSITIONS = ("upper", "lower")
+
+
+@dataclass(frozen=True)
+class Traction:
+    """A prescribed surface traction: ``uniform`` with ``value = (Px, Py)``, or ``exact``."""
+
+    kind: str = "uniform"
+    value: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self):
+        if self.kind not in ("uniform", "exact"):
+            raise SceneError(f"traction kind must be 'uniform' or 'exact', got {short(self.kind)}")
+        object.__setattr__(self, "value", pair(self.value, "traction value"))
+
+
+@dataclass(frozen=True)
+class BoundaryPart:
+    """A support or load on one side of a body, optionally on a sub-interval of that side
+    (an ``x`` interval on ``face``/``far``, a ``y`` interval on ``left``/``right``)."""
+
+    on: str
+    kind: str
+    traction: Traction | None = None
+    interval: tuple[float, float] | None = None
+    name: str = ""
+
+    def __post_init__(self):
+        if self.on not in SIDES:
+            raise SceneError(f"boundary part {short(self.name)}: 'on' must be one of {SIDES}, got {short(self.on)}")
+        if self.kind not in PART_KINDS:
+            raise SceneError(f"boundary part {short(self.name)}: kind must be one of {PART_KINDS}, "
+                             f"got {short(self.kind)}")
+        if (self.kind == "traction") != (self.traction is not None):
+            raise SceneError(f"boundary part {short(self.name)}: a traction part needs a 'traction' "
+                             "(and only traction parts have one)")
+        if self.interval is not None:
+            lo, hi = pair(self.interval, f"boundary part {short(self.name)} interval")
+            if not lo < hi:
+                raise SceneError(f"boundary part {short(self.name)}: interval must have lo < hi, "
+                                 f"got {short(self.interval)}")
+            object.__setattr__(self, "interval", (lo, hi))
+
+
+@dataclass(frozen=True)
+class Body:
+    """One elastic body. ``layers`` is the number of element layers at mesh level 0 and
+    ``focus_depth`` the depth below the face over which the layers are graded finest."""
+
+    name: str
+    position: str
+    x_range: tuple[float, float]
+    far: float
+    face: Profile
+    material: Material
+    boundary: tuple[BoundaryPart, ...] = ()
+    body_force: tuple[float, float] = (0.0, 0.0)
+    layers: int = 4
+    focus_depth: float | None = None
+
+    def __post_init__(self):
+        if self.position not in POSITIONS:
+            raise SceneError(f"body {short(self.name)}: position must be 'upper' or 'lower', "
+                             f"got {short(self.position)}")
+        x0, x1 = pair(self.x_range, f"body {short(self.name)} x range")
+        if not x0 < x1:
+            raise SceneError(f"body {short(self.name)}: x range must have x0 < x1, got {short(self.x_range)}")
+        object.__setattr__(self, "x_range", (x0, x1))
+        object.__setattr__(self, "body_force", pair(self.body_force, f"body {short(self.name)} body_force"))
+        far = number(self.far, f"body {short(self.name)}: far")
+        object.__setattr__(self, "far", far)
+        integer(self.layers, f"body {short(self.name)}: layers", minimum=1)
+        if not isinstance(self.face, Profile):
+            raise SceneError(f"body {short(self.name)}: face must be a profile (flat, parabola, circle, cosine)")
+        if not isinstance(self.material, Material):
+            raise SceneError(f"body {short(self.name)}: material must be a cvxdual.Material")
+        lo, hi = self.face.domain()
+        if x0 < lo or x1 > hi:
+            raise SceneError(f"body {short(self.name)}: its face ({self.face.kind}) is a graph only on "
+                             f"[{lo:g}, {hi:g}], not on the body's x range [{x0:g}, {x1:g}]; "
+                             "shrink the body or enlarge the arc")
+        # The far side must not touch the face: sample the face densely (the closed set of
+        # profile kinds has at most a few oscillations per wavelength, resolved by 4001 points).
+        n_infl = self.face.count_inflexions(x0, x1)
+        if n_infl > MAX_INFLEXIONS:
+            raise SceneError(f"body {short(self.name)}: its face has {n_infl:.3g} inflexion points on the body, more "
+                             f"than {MAX_INFLEXIONS} (each stretch needs its own mesh columns, and the far-side check "
+                             "samples the face at 4 points per stretch); lengthen the wavelength")
+        xs = np.linspace(x0, x1, 4001)
+        fx = self.face.value(xs)
+        if not np.all(np.isfinite(fx)):
+            raise SceneError(f"body {short(self.name)}: its face is not finite on [{x0:g}, {x1:g}]")
+        gap = (far - fx) if self.position == "upper" else (fx - far)
+        if gap.min() <= 0:
+            raise SceneError(f"body {short(self.name)}: the face crosses the far side y = {far:g}; "
+                             f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
+        if self.focus_depth is not None and not number(self.focus_depth, f"body {short(self.name)}: focus_depth") > 0:
+            raise SceneError(f"body {short(self.name)}: focus_depth must be positive, got {short(self.focus_depth)}")
+        for part in self.boundary:
+            if part.interval is not None:
+                self._check_interval(part, x0, x1, far)
+            if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
+                raise SceneError(f"body {short(self.name)}: a {part.kind} support on a curved face is not "
+                                 "axis-aligned; put supports on flat sides")
+
+    def _check_interval(self, part: BoundaryPart, x0: float, x1: float, far: float) -> None:
+        """A part's interval must lie on its side: an x interval within the body's x range on
+        ``face``/``far``, a y interval between the face and the far side on ``left``/``right``
+        (a load off its side would silently act on nothing)."""
+        if part.on in ("face", "far"):
+            lo, hi, what = x0, x1, "x range"
+        else:
+            ends = (float(self.face.value(x0 if part.on == "left" else x1)), far)
+            lo, hi, what = min(ends), max(ends), f"{part.on} side's y range"
+        tol = 1e-9 * (hi - lo)  # rounding of values the user copied from the body's own numbers
+        a, b = part.interval
+        if a < lo - tol or b > hi + tol:
+            raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} has interval [{a:g}, {b:g}] "
+                             f"outside its side ({what} [{lo:g}, {hi:g}]); give an interval on the side")
+
+    @property
+    def sign(self) -> float:
+        """+1 for the upper body (far side above the face), -1 for the lower body."""
+        return 1.0 if self.position == "upper" else -1.0
+
+    def height(self, x) -> np.ndarray:
+        return np.abs(self.far - self.face.value(x))
+
+
+@dataclass(frozen=True)
+class ExactSpec:
+    """The scene's closed-form ``lam*``: ``uniform`` (a constant Voigt stress, both bodies)
+    or ``hertz`` (linearised Hertz line contact of radius ``R`` under ``load`` per unit
+    length of the full contact, centred at ``xc`` on the face ``y = 0``)."""
+
+    kind: str
+    stress: tuple[float, float, float] | None = None
+    R: float | None = None
+    load: float | None = None
+    xc: float = 0.0
+
+    def __post_init__(self):
+        if self.kind == "uniform":
+            if self.stress is None or isinstance(self.stress, str) or len(self.stress) != 3:
+                raise SceneError("exact field 'uniform' needs stress = [s11, s22, s12]")
+            object.__setattr__(self, "stress", tuple(number(v, "exact field stress") for v in self.stress))
+            if not any(self.stress):
+                raise SceneError("exact field 'uniform' with zero stress: errors relative to it are undefined; "
+                                 "give a nonzero stress or drop the [exact] table")
+        elif self.kind == "hertz":
+            for name in ("R", "load"):
+                v = getattr(self, name)
+                if v is None or number(v, f"exact field 'hertz' {name}") <= 0:
+                    raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
+                object.__setattr__(self, name, float(v))
+        else:
+            raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {short(self.kind)}")
+        object.__setattr__(self, "xc", number(self.xc, "exact field xc"))
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """Level-0 mesh: ``columns`` element columns across all bodies, graded so that elements
+    are ``grading`` times larger far from ``focus`` (an x interval) than inside it."""
+
+    columns: int = 8
+    focus: tuple[float, float] | None = None
+    grading: float = 1.0
+    default_level: int = 3
+
+    def __post_init__(self):
+        integer(self.columns, "mesh columns", minimum=1)
+        if not number(self.grading, "mesh grading") >= 1:
+            raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {short(self.grading)}")
+        integer(self.default_level, "mesh default_level", minimum=0)
+        if self.focus is not None:
+            lo, hi = pair(self.focus, "mesh focus")
+            if not lo <= hi:
+                raise SceneError(f"mesh focus must have lo <= hi, got {short(self.focus)}")
+            object.__setattr__(self, "focus", (lo, hi))
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Tresca friction on the candidate contact interval: the tangential traction is at most
+    ``g`` in magnitude, sticking below it and slipping at it (``g = inf``: full stick).
+
+    ``g`` is a traction (force per unit length of the contact face, per unit thickness), in the
+    scene's stress units, acting on every pair of ``[a, b]``, open ones included: Tresca's
+    threshold does not depend on the pressure. Coulomb friction (``|t| <= mu p``) makes the
+    problem non-convex and is not offered."""
+
+    kind: str = "tresca"
+    g: float = field(kw_only=True)  # no sensible default: a threshold must be given
+
+    def __post_init__(self):
+        if self.kind != "tresca":
+            raise SceneError(f"friction kind must be 'tresca', got {short(self.kind)}; Coulomb friction is not "
+                             "convex and is not offered: give kind = \"tresca\" with a slip threshold g")
+        g = self.g
+        if isinstance(g, bool) or not isinstance(g, numbers.Real) or g != g:  # g != g: NaN
+            raise SceneError(f"friction g (the Tresca slip threshold) must be a number >= 0, got {short(g)}; "
+                             "give a traction in the scene's stress units, e.g. g = 100.0, or g = inf for full stick")
+        if g < 0:
+            raise SceneError(f"friction g (the Tresca slip threshold) must be >= 0, got {short(g)}; give its "
+                             "magnitude, a traction in the scene's stress units (0 = frictionless, inf = full stick)")
+        # inf is full stick; every finite value goes through the one number check (range, magnitude)
+        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)")
+        object.__setattr__(self, "g", v)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Two bodies in (potential) contact, frictionless or with Tresca friction (``friction``).
+    ``bodies[0]`` is the upper body."""
+
+    name: str
+    bodies: tuple[Body, Body]
+    description: str = ""
+    contact: tuple[float, float] | None = None
+    gap: Profile | None = None
+    exact: ExactSpec | None = None
+    mesh: MeshSpec = field(default_factory=MeshSpec)
+    units: tuple[str, str] = ("m", "Pa")
+    friction: Friction | None = None  # None: frictionless
+
+    def __post_init__(self):
+        text(self.name, "scene name")
+        text(self.description, "scene description")
+        if self.friction is not None and not isinstance(self.friction, Friction):
+            raise SceneError(f"scene friction must be a cvxdual.scene.Friction or None, got {short(self.friction)}; "
+                             "give Friction(g=...) (Tresca), or None for frictionless contact")
+        if len(self.bodies) != 2:
+            raise SceneError(f"a scene has exactly two bodies, got {len(self.bodies)}")
+        up, lo = self.bodies
+        if up.position == lo.position:
+            raise SceneError("one body must be 'upper' and the other 'lower'")
+        if up.position == "lower":
+            object.__setattr__(self, "bodies", (lo, up))
+            up, lo = lo, up
+        if up.material.plane != lo.material.plane:
+            raise SceneError("both bodies must be in the same plane state (strain or stress)")
+        ov = (max(up.x_range[0], lo.x_range[0]), min(up.x_range[1], lo.x_range[1]))
+        if not ov[0] < ov[1]:
+            raise SceneError(f"the bodies' x ranges {up.x_range} and {lo.x_range} do not overlap; "
+                             "there is no candidate contact interval")
+        a, b = ov if self.contact is None else pair(self.contact, "contact interval")
+        if not (ov[0] - 1e-12 * abs(ov[1] - ov[0]) <= a < b <= ov[1] + 1e-12 * abs(ov[1] - ov[0])):
+            raise SceneError(f"the contact interval [{a:g}, {b:g}] must lie in both bodies' x ranges "
+                             f"(overlap [{ov[0]:g}, {ov[1]:g}])")
+        object.__setattr__(self, "contact", (a, b))
+        eps = self.gap_at(np.linspace(a, b, 2001))
+        if not np.all(np.isfinite(eps)):
+            raise SceneError("the initial gap is not finite on the contact interval")
+        for body in self.bodies:
+            for part in body.boundary:
+                if part.on == "face" and part.kind != "traction":
+                    lo_, hi_ = part.interval or body.x_range
+                    if lo_ < b and hi_ > a:
+                        raise SceneError(f"body {body.name!r}: support {part.name!r} overlaps the contact "
+                                         f"interval [{a:g}, {b:g}]; a contact face cannot be supported")
+        if self.exact is not None and self.exact.kind == "hertz":
+            if not (up.face.is_flat() and lo.face.is_flat()):
+                raise SceneError("the 'hertz' exact field is for the linearised geometry: both faces flat")
+            if self.gap is not None:
+                raise SceneError("with exact = 'hertz' the gap x^2/(2R) follows from exact.R; "
+                                 "do not declare a separate gap")
+            for body in self.bodies:
+                if body.material.E is None:
+                    raise SceneError("the 'hertz' exact field needs isotropic materials (E, nu)")
+
+    @property
+    def upper(self) -> Body:
+        return self.bodies[0]
+
+    @property
+    def lower(self) -> Body:
+        return self.bodies[1]
+
+    @property
+    def gap_profile(self) -> Profile:
+        """The profile ``g`` added to ``f' - f''`` (from ``exact.R`` for a Hertz scene)."""
+        if self.exact is not None and self.exact.kind == "hertz":
+            from .profiles import Parabola
+            return Parabola(R=self.exact.R, xc=self.exact.xc)
+        return self.gap if self.gap is not None else Flat(0.0)
+
+    def gap_at(self, x) -> np.ndarray:
+        """Initial gap ``eps(x) = f'(x) - f''(x) + g(x)``."""
+        x = np.asarray(x, float)
+        return self.upper.face.value(x) - self.lower.face.value(x) + self.gap_profile.value(x)
+
+    @property
+    def x_extent(self) -> tuple[float, float]:
+        return (min(b.x_range[0] for b in self.bodies), max(b.x_range[1] for b in self.bodies))
+
+    @property
+    def length_scale(self) -> float:
+        """A representative length (largest body dimension), used for scaling and tolerances."""
+        x0, x1 = self.x_extent
+        heights = [float(np.max(b.height(np.linspace(*b.x_range, 101)))) for b in self.bodies]
+        return max(x1 - x0, *heights)
+
+
+def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, str]) -> Scene:
+    """The same scene in other units: lengths multiplied by ``length``, stresses by ``stress``
+    (forces per unit thickness by ``length * stress``, body forces by ``stress / length``; the
+    Tresca threshold is a traction, so by ``stress``)."""
+    from .materials import Material
+
+    def prof(p: Profile | None):
+        if p is None:
+            return None
+        return replace(p, **{f.name: getattr(p, f.name) * length for f in fields(p)})
+
+    def mat(m: Material) -> Material:
+        return Material(C=tuple(tuple(v * stress for v in row) for row in m.C),
+                        E=None if m.E is None else m.E * stress, nu=m.nu, plane=m.plane,
+                        description=m.description)
+
+    def ival(iv):
+        return None if iv is None else (iv[0] * length, iv[1] * length)
+
+    def part(p: BoundaryPart) -> BoundaryPart:
+        tr = p.traction
+        if tr is not None and tr.kind == "uniform":
+            tr = replace(tr, value=(tr.value[0] * stress, tr.value[1] * stress))
+        return replace(p, traction=tr, interval=ival(p.interval))
+
+    bodies = tuple(replace(b, x_range=ival(b.x_range), far=b.far * length, face=prof(b.face),
+                           material=mat(b.material), boundary=tuple(part(p) for p in b.boundary),
+                           body_force=(b.body_force[0] * stress / length, b.body_force[1] * stress / length),
+                           focus_depth=None if b.focus_depth is None else b.focus_depth * length)
+                   for b in scene.bodies)
+    ex = scene.exact
+    if ex is not None:
+        ex = replace(ex, stress=None if ex.stress is None else tuple(v * stress for v in ex.stress),
+                     R=None if ex.R is None else ex.R * length,
+                     load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length)
+    fr = scene.friction
+    if fr is not None:
+        fr = replace(fr, g=fr.g * stress)  # inf stays inf: full stick in any units
+    return replace(scene, bodies=bodies, contact=ival(scene.contact), gap=prof(scene.gap), exact=ex,
+                   mesh=replace(scene.mesh, focus=ival(scene.mesh.focus)), units=tuple(units), friction=fr)

@@ -1,0 +1,299 @@
+"""Scenes from TOML files, and the built-in scenes.
+
+Every built-in scene is a TOML file in ``cvxdual/scene/data``. A user file may start from one with
+``base = "hertz"``, or from another file with ``base = "other.toml"`` (relative to the directory
+of the file holding the ``base`` line), and override any value (tables are merged key by key);
+the CLI's ``--set mesh.grading=4`` does the same for single values. Keys are checked strictly:
+an unknown key is an error that names it. The format is documented in docs/scenes.md.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from ..errors import SceneError
+from ..validate import integer, number, short, table, text
+from .materials import Material
+from .profiles import profile_from_dict
+from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
+
+TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
+BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
+PART_KEYS = {"on", "kind", "traction", "interval"}
+MATERIAL_KEYS = {"E", "nu", "hooke"}
+CONTACT_KEYS = {"interval", "gap", "friction"}
+FRICTION_KEYS = {"kind", "g"}
+EXACT_KEYS = {"kind", "stress", "R", "load", "xc"}
+MESH_KEYS = {"columns", "focus", "grading", "default_level"}
+TRACTION_KEYS = {"kind", "value"}
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files("cvxdual.scene.data").iterdir() if p.name.endswith(".toml"))
+
+
+def builtin_scenes() -> dict[str, str]:
+    """``{name: one-line description}`` of the built-in scenes."""
+    return {n: builtin_data(n).get("description", "") for n in builtin_names()}
+
+
+MAX_DEPTH = 32  # a scene nests about 5 tables deep; far deeper input is refused, not recursed into
+
+
+def builtin_data(name) -> dict:
+    """The raw dict of a built-in scene, as read from its TOML file."""
+    if not isinstance(name, str) or name not in builtin_names():
+        raise SceneError(f"unknown scene {short(name)}; built-in scenes: {', '.join(builtin_names())} "
+                         "(or give a path to a .toml file)")
+    return tomllib.loads(resources.files("cvxdual.scene.data").joinpath(f"{name}.toml").read_text())
+
+
+def _replaces(base: dict, over: dict) -> bool:
+    """A table that changes what the base table *is* replaces it instead of merging: a profile
+    or traction of another ``kind`` (their parameters depend on the kind), or a material
+    switching between ``E``/``nu`` and ``hooke``."""
+    if "kind" in over and "kind" in base and over["kind"] != base["kind"]:
+        return True
+    mat = {"E", "nu", "hooke"}
+    return bool(set(over) & mat) and ("hooke" in over) != ("hooke" in base)
+
+
+def merge(base: dict, over: dict) -> dict:
+    """Deep merge: tables merge key by key (unless :func:`_replaces`), everything else is replaced.
+    A boundary part whose kind changes keeps only its place (``on``, ``interval``) from the base."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        b = out.get(k)
+        if isinstance(v, dict) and isinstance(b, dict) and "on" in b and v.get("kind", b.get("kind")) != b.get("kind"):
+            out[k] = {**{key: b[key] for key in ("on", "interval") if key in b}, **copy.deepcopy(v)}
+        elif isinstance(v, dict) and isinstance(b, dict) and not _replaces(b, v):
+            out[k] = merge(b, v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def parse_assignment(text: str) -> dict:
+    """``"mesh.grading=4"`` -> ``{"mesh": {"grading": 4}}`` (the value is parsed as TOML)."""
+    if "=" not in text:
+        raise SceneError(f"--set expects KEY=VALUE (e.g. mesh.grading=4), got {text!r}")
+    key, value = text.split("=", 1)
+    try:
+        v = _toml(f"v = {value.strip()}", "--set value")["v"]
+    except SceneError:
+        v = value.strip()  # a bare word is taken as a string
+        if v[:1] in "[{\"'":  # but a broken array, table or string is an error, not a word
+            raise
+    if key.strip() == "base":
+        raise SceneError("--set cannot change 'base'; write base = \"NAME\" in a scene file and pass it with --scene")
+    d: dict = v
+    for part in reversed(key.strip().split(".")):
+        if not part:
+            raise SceneError(f"--set: bad key {short(key)}")
+        d = {part: d}
+    return d
+
+
+def _toml(source: str, what: str) -> dict:
+    try:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{what} is not valid TOML: {e}") from None
+    except RecursionError:
+        raise SceneError(f"{what} is nested too deeply to be a scene") from None
+    _check_depth(data, what)
+    return data
+
+
+def _check_depth(data, what: str) -> None:
+    """Refuse values nested deeper than :data:`MAX_DEPTH` (without recursing into them)."""
+    level = [data]
+    for _ in range(MAX_DEPTH):
+        level = [v for x in level for v in (x.values() if isinstance(x, dict) else x)
+                 if isinstance(v, (dict, list, tuple))]
+        if not level:
+            return
+    raise SceneError(f"{what} is nested more than {MAX_DEPTH} levels deep; a scene has a few levels of tables")
+
+
+def is_path(source) -> bool:
+    """Whether a scene reference names a file (``x.toml``, ``dir/x``) rather than a built-in scene."""
+    text_ = str(source)
+    return text_.endswith(".toml") or bool(Path(text_).suffix) or "/" in text_ or "\\" in text_
+
+
+def _path_text(path: Path, limit: int = 100) -> str:
+    """``repr`` of a path for a message, cut from the left: the file's name is the informative end."""
+    text_ = repr(str(path))
+    return text_ if len(text_) <= limit else "'..." + text_[len(text_) - limit + 4:]
+
+
+def _read_file(path: Path, where: str) -> dict:
+    """The raw dict of scene file ``path`` (``where`` names it in messages)."""
+    if not path.is_file():
+        raise SceneError(f"{where} does not exist")
+    try:
+        return _toml(path.read_text(encoding="utf-8"), where)
+    except UnicodeDecodeError:
+        raise SceneError(f"{where} is not UTF-8 text; save it as UTF-8 TOML") from None
+    except OSError as e:
+        raise SceneError(f"cannot read {where} ({e.strerror or e}); check its permissions") from None
+
+
+def _base_data(ref, holder: Path | None, holder_name: str) -> tuple[dict, Path | None, str]:
+    """The raw dict named by ``base = ref`` in the scene ``holder_name`` (its file ``holder``, or
+    ``None`` for a built-in scene or a dict): a built-in name, or a path relative to the directory
+    of ``holder``. Returns the data, its file (``None`` for a built-in) and its name for messages."""
+    if not isinstance(ref, str) or not ref:
+        raise SceneError(f"{holder_name}: base must be a built-in scene name ({', '.join(builtin_names())}) or the "
+                         f"path of a .toml file, got {short(ref)}")
+    if not is_path(ref):
+        if ref not in builtin_names():
+            raise SceneError(f"{holder_name}: base {short(ref)} is not a built-in scene ({', '.join(builtin_names())})"
+                             "; give one of those, or the path of a .toml file relative to this file, e.g. "
+                             "base = \"other.toml\"")
+        return builtin_data(ref), None, f"built-in scene {ref!r}"
+    path = Path(ref).expanduser()
+    relative = not path.is_absolute()
+    if relative:
+        if holder is None:
+            raise SceneError(f"{holder_name}: base {short(ref)} is a relative path, but this scene is not read from "
+                             "a file, so there is no directory to resolve it against; give an absolute path or a "
+                             "built-in scene name, or load the scene from a file")
+        path = holder.parent / path
+    where = f"scene file {_path_text(path)}"
+    if not path.is_file():
+        rel = " (relative to the directory of the file holding the base line)" if relative else ""
+        raise SceneError(f"{holder_name}: base {short(ref)} does not exist: no file {_path_text(path)}; "
+                         f"fix the path{rel} or name a built-in scene ({', '.join(builtin_names())})")
+    return _read_file(path, where), path, where
+
+
+def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | None = None) -> Scene:
+    """A scene from a built-in name, a TOML path, or a dict; ``overrides`` are merged on top.
+
+    ``base`` (in a file, a built-in scene or a dict) names the scene to start from: a built-in
+    name, or a file path, relative to the directory of the file holding the ``base`` line (a
+    dict has no directory: its ``base`` may be a built-in name or an absolute path). Bases may
+    nest; a cycle is refused."""
+    if source is None:
+        source = "hertz"
+    holder: Path | None = None
+    if isinstance(source, dict):
+        _check_depth(source, "the scene")
+        data = source
+        name = "the scene (a dict)"
+        seen = []
+    elif is_path(source):
+        holder = Path(source)
+        name = f"scene file {short(str(holder))}"
+        data = _read_file(holder, name)
+        data.setdefault("name", holder.stem)
+        seen = [holder.resolve()]
+    else:
+        data = builtin_data(str(source))
+        name = f"built-in scene {str(source)!r}"
+        seen = [f"built-in scene {str(source)!r}"]
+    data = copy.deepcopy(data)
+    chain = [name]
+    while "base" in data:
+        ref = data.pop("base")
+        base, holder, name = _base_data(ref, holder, name)
+        key = holder.resolve() if holder is not None else name
+        chain.append(name)
+        if key in seen:
+            raise SceneError(f"scene bases form a cycle: {' -> '.join(chain)}; remove one of these base lines")
+        seen.append(key)
+        data = merge(base, data)
+    for o in overrides or []:
+        _check_depth(o, "an override")
+        if isinstance(o, dict) and "base" in o:
+            raise SceneError("an override cannot change 'base'; start from the other scene instead")
+        data = merge(data, table(o, "an override"))
+    return scene_from_dict(data)
+
+
+def _check_keys(d, allowed: set[str] | None, where: str) -> dict:
+    table(d, where)
+    if allowed is None:
+        return d
+    unknown = sorted(set(d) - allowed)
+    if unknown:
+        raise SceneError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; "
+                         f"allowed: {', '.join(sorted(allowed))}")
+    return d
+
+
+def _need(d: dict, key: str, where: str):
+    if key not in d:
+        raise SceneError(f"{where}: missing key {key!r}")
+    return d[key]
+
+
+def scene_from_dict(data: dict) -> Scene:
+    _check_keys(data, TOP_KEYS, "scene")
+    plane = text(data.get("plane", "strain"), "scene plane")
+    units = data.get("units", ["m", "Pa"])
+    if not (isinstance(units, list) and len(units) == 2 and all(isinstance(u, str) for u in units)):
+        raise SceneError(f"scene: units must be [length, stress] names, e.g. [\"mm\", \"MPa\"], got {short(units)}")
+    bodies_d = _check_keys(_need(data, "bodies", "scene"), None, "bodies")
+    bodies = tuple(_body(name, bd, plane) for name, bd in bodies_d.items())
+    contact = _check_keys(data.get("contact", {}), CONTACT_KEYS, "contact")
+    gap = profile_from_dict(contact["gap"], "contact.gap") if "gap" in contact else None
+    friction = _friction(contact["friction"]) if "friction" in contact else None
+    exact = None
+    if "exact" in data:
+        e = _check_keys(data["exact"], EXACT_KEYS, "exact")
+        exact = ExactSpec(kind=text(_need(e, "kind", "exact"), "exact.kind"), stress=e.get("stress"), R=e.get("R"),
+                          load=e.get("load"), xc=e.get("xc", 0.0))
+    m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
+    mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
+                    grading=number(m.get("grading", 1.0), "mesh.grading"),
+                    default_level=integer(m.get("default_level", 3), "mesh.default_level"))
+    return Scene(name=data.get("name", "scene"), bodies=bodies, description=data.get("description", ""),
+                 contact=contact.get("interval"), gap=gap, exact=exact, mesh=mesh, units=tuple(units),
+                 friction=friction)  # Scene checks
+
+
+def _friction(d) -> Friction:
+    """``[contact] friction = { kind = "tresca", g = ... }``; ``kind`` defaults to tresca, so
+    ``--set contact.friction.g=100`` alone gives a frictionless scene Tresca friction."""
+    _check_keys(d, FRICTION_KEYS, "contact.friction")
+    kind = d.get("kind", "tresca")
+    if "g" not in d and kind == "tresca":  # another kind: Friction's error on the kind says more
+        raise SceneError("contact.friction: missing key 'g'; give the Tresca slip threshold, a traction in the "
+                         "scene's stress units, e.g. friction = { g = 100.0 } (g = inf: full stick)")
+    return Friction(kind=kind, g=d.get("g"))
+
+
+def _body(name: str, d: dict, plane: str) -> Body:
+    where = f"bodies.{name}"
+    _check_keys(d, BODY_KEYS, where)
+    mat = _check_keys(_need(d, "material", where), MATERIAL_KEYS, f"{where}.material")
+    if "hooke" in mat:
+        if set(mat) != {"hooke"}:
+            raise SceneError(f"{where}.material: give either E and nu, or hooke, not both")
+        material = Material.hooke(mat["hooke"], plane=plane)
+    else:
+        material = Material.isotropic(_need(mat, "E", f"{where}.material"), _need(mat, "nu", f"{where}.material"),
+                                      plane=plane)
+    parts = []
+    for pname, pd in _check_keys(d.get("boundary", {}), None, f"{where}.boundary").items():
+        pw = f"{where}.boundary.{pname}"
+        _check_keys(pd, PART_KEYS, pw)
+        tr = None
+        if "traction" in pd:
+            td = _check_keys(pd["traction"], TRACTION_KEYS, f"{pw}.traction")
+            tr = Traction(kind=td.get("kind", "uniform"), value=td.get("value", (0.0, 0.0)))
+        parts.append(BoundaryPart(on=_need(pd, "on", pw), kind=_need(pd, "kind", pw), traction=tr,
+                                  interval=pd.get("interval"), name=pname))
+    focus_depth = d.get("focus_depth")
+    return Body(name=name, position=_need(d, "position", where), x_range=_need(d, "x", where),
+                far=number(_need(d, "far", where), f"{where}.far"),
+                face=profile_from_dict(_need(d, "face", where), f"{where}.face"),
+                material=material, boundary=tuple(parts), body_force=d.get("body_force", (0.0, 0.0)),
+                layers=integer(d.get("layers", 4), f"{where}.layers"),
+                focus_depth=None if focus_depth is None else number(focus_depth, f"{where}.focus_depth"))
