@@ -4,6 +4,14 @@ elastic bodies with an enlarging contact zone, after Tran Van Bon (1986), on CVX
 Names from the paper are used where they help a reader holding it: ``lam`` (stress),
 ``eps`` (initial gap), ``E``, ``A_h``, ``Z``, ``T`` (the paper's ``F``), ``J0``/``J-``,
 ``K0h`` (the cone of admissible test displacements), ``S_h`` (piecewise-constant stresses).
+
+The package's folders are its data flow: ``scene`` (what the user describes) -> ``reference``
+(closed forms) -> ``geometry`` (meshes, pieces, loads) -> ``linalg`` -> the stress spaces ``p0``
+(the paper's) and ``eq`` (equilibrium stresses and certified bounds), each with its CVXPY model
+(over ``model``) and its fast solver (over ``fast``) -> ``solution`` -> ``pipeline`` (the entry
+points) -> ``outputs`` -> ``study`` and ``cli``. :data:`__all__` is the documented API; the public
+modules are this one, ``cvxdual.scene``, ``cvxdual.reference``, ``cvxdual.voigt`` (stress measures),
+``cvxdual.outputs``, ``cvxdual.study`` and ``cvxdual.errors``, each with its ``__all__``.
 """
 
 from importlib.metadata import PackageNotFoundError
@@ -23,15 +31,25 @@ from .errors import (
     UnbalancedLoadError,
     UnknownSolverError,
 )
-from .geometry.mesh import build_mesh
-from .geometry.triangulation import discretize
-from .p0.assembly import System, assemble
-from .pipeline import build_model, build_system, recover, solve
-from .reference.exact import exact_field
-from .scene.materials import Material
-from .scene.scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
-from .scene.scenefile import builtin_scenes, load_scene
-from .solution import Solution
+from .geometry import build_mesh, discretize
+from .outputs import write_outputs
+from .p0 import System, assemble
+from .pipeline import build_model, build_system, solve
+from .reference import HertzData, exact_field, hertz_line_contact, hertz_pressure, mcewen_stress
+from .scene import (
+    Body,
+    BoundaryPart,
+    ExactSpec,
+    Friction,
+    Material,
+    MeshSpec,
+    Scene,
+    Traction,
+    builtin_scenes,
+    load_scene,
+    parse_assignment,
+)
+from .solution import Solution, SolverStats
 
 try:  # the installed distribution's version: pyproject.toml is its one source
     __version__ = _version("cvxdual")
@@ -39,7 +57,7 @@ except PackageNotFoundError:  # a source tree that was never installed
     __version__ = "unknown (not installed)"
 
 # the CVXPY models load CVXPY (0.3 s): on first use, so that the fast path never pays for it
-_LAZY = {"DualModel": ".dual", "EquilibriumModel": ".eqmodel", "PrimalModel": ".primal"}
+_LAZY = {"DualModel": ".p0.dual", "EquilibriumModel": ".eq.model", "PrimalModel": ".p0.primal"}
 
 
 def __getattr__(name):
@@ -48,11 +66,22 @@ def __getattr__(name):
         return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
+
 __all__ = [
-    "AccuracyError", "Body", "BoundaryPart", "CvxdualError", "DualModel", "EquilibriumModel", "ExactSpec",
-    "Friction", "Material", "MeshError", "MeshSpec", "ModelError", "NoAdmissibleStressError", "OutputError",
-    "PrimalModel", "Scene", "SceneError", "Solution", "SolverError", "System", "TimeLimitError",
-    "TooLargeError", "Traction", "UnbalancedLoadError", "UnknownSolverError", "assemble", "build_mesh",
-    "build_model", "build_system", "builtin_scenes", "discretize", "exact_field", "load_scene", "recover",
-    "solve",
+    # solving
+    "solve", "build_model", "build_system", "Solution", "SolverStats",
+    # scenes
+    "Scene", "Body", "BoundaryPart", "ExactSpec", "Friction", "Material", "MeshSpec", "Traction", "load_scene",
+    "builtin_scenes", "parse_assignment",
+    # the CVXPY models
+    "DualModel", "EquilibriumModel", "PrimalModel",
+    # meshes and assembly
+    "build_mesh", "discretize", "assemble", "System",
+    # closed forms
+    "exact_field", "HertzData", "hertz_line_contact", "hertz_pressure", "mcewen_stress",
+    # outputs
+    "write_outputs",
+    # errors
+    "CvxdualError", "AccuracyError", "MeshError", "ModelError", "NoAdmissibleStressError", "OutputError", "SceneError",
+    "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError",
 ]

@@ -158,9 +158,6 @@ def _solver_log_on_stderr(on: bool):
         os.close(saved)
 
 
-STUDIES = ("convergence", "speed", "stability", "bounds")  # built-in specs: cvxdual/study/specs/NAME.*
-
-
 def _cmd_study(args) -> int:
     from .study.command import main as study_main
     return study_main(args)
@@ -202,8 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
     from .study.command import add_parser as add_study_parser
-    st = add_study_parser(sub, STUDIES)
-    st.set_defaults(func=_cmd_study)
+    add_study_parser(sub).set_defaults(func=_cmd_study)
     return p
 
 

@@ -7,6 +7,10 @@ problem and how to fix it; the CLI prints it as one line and exits non-zero.
 from __future__ import annotations
 
 
+__all__ = ["AccuracyError", "CvxdualError", "MeshError", "ModelError", "NoAdmissibleStressError", "OutputError",
+           "SceneError", "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError"]
+
+
 class CvxdualError(Exception):
     """Base class of all errors raised by cvxdual. ``cli`` is the same message with advice for
     the command line (``--level`` rather than ``level=``), where the two differ."""

@@ -1,24 +1,26 @@
-"""The :class:`Solution` of a scene and the checks every solution passes
-(docs/theory.md#recovery-and-checks).
+"""The :class:`Solution` of a scene, what its solver reports (:class:`SolverStats`), and the
+tolerances every returned solution meets (docs/theory.md#recovery-and-checks).
 
-From the stresses ``t`` and the recovered displacements ``u_h``: equilibrium and sign of the
-contact forces, the constitutive law ``t_P = C_P B_P u_h``, complementarity and the discrete
-duality gap. A result that fails the promised tolerances (:data:`TOLERANCES`) raises
-:class:`~cvxdual.errors.AccuracyError`; it is never returned.
+The checks themselves belong to each stress space: :mod:`cvxdual.p0.checks` (equilibrium and
+sign of the contact forces, ``t_P = C_P B_P u_h``, complementarity, the duality gap) and
+:mod:`cvxdual.eq.bounds` (exact admissibility). A result that fails the promised tolerances
+raises :class:`~cvxdual.errors.AccuracyError` (:func:`check_solution`); it is never returned.
 """
 
 from __future__ import annotations
 
-import time
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import AccuracyError
-from .p0.assembly import System
-from .p0.norms import VOIGT_WEIGHT, stress_error
-from .reference.exact import exact_field
-from .scene.scene import Scene
+
+if TYPE_CHECKING:  # annotations only: a solution holds the objects of the layers that built it
+    from .p0.assembly import System
+    from .scene import Scene
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
@@ -42,6 +44,67 @@ ACTIVE_TOL = 1e-6  # an active pair's force exceeds this fraction of the largest
 FORCE_FLOOR = 1e-3  # contact forces below this fraction of the total load are "no contact"
 
 
+@dataclass(frozen=True)
+class SolverStats(Mapping):
+    """What the solver of a solution reports (:attr:`Solution.solver`), one type for every path.
+    Fields that do not apply to the path are ``None``; it reads as a mapping of the others too
+    (``sol.solver["iterations"]``, ``dict(sol.solver)``). Times in seconds."""
+
+    solver: str  # a CVXPY solver name, "fast", or "none (...)" where nothing had to be solved
+    status: str  # "optimal" on every returned solution
+    iterations: int | None = None
+    solve_time: float | None = None  # wall time of the solve (fast path: its warm start included)
+    fallback: str | None = None  # why another solver solved instead, if one did
+    # -- the CVXPY path (cvxdual.model.solvers.solve_problem) --
+    compile_time: float | None = None  # CVXPY's canonicalisation, inside the solve call
+    solver_time: float | None = None  # the solver's own clock
+    setup_time: float | None = None  # the solver's set-up (CVXPY), the local blocks (eq fast path)
+    # -- the fast paths (cvxdual.fast) --
+    backend: str | None = None  # factorisation backend of the last factorisation
+    factorizations: int | None = None
+    factor_time: float | None = None
+    schur_updates: int | None = None
+    max_update: int | None = None
+    refinements: int | None = None
+    warm_start: str | None = None  # where the initial active set came from
+    warm_start_time: float | None = None
+    active: np.ndarray | None = None  # the final active set (pairs; eq: contact parameters (n_c, 2))
+    # -- the equilibrium space (cvxdual.eq) --
+    post_time: float | None = None  # the exactness step
+    contact_change: float | None = None  # its largest relative change of a contact traction
+    projection_iterations: int | None = None
+    max_change: float | None = None  # its largest change of any parameter, relative to the stress scale
+    n_variables: int | None = None
+    n_equalities: int | None = None
+    n_inequalities: int | None = None
+    objective: float | None = None  # the model's objective at the exact field
+    multipliers: dict | None = None  # nondimensional: "divergence" (n_T, 6), "opening" (n_c, 2)
+    pinned: np.ndarray | None = None  # multipliers pinned against floating motions
+    n_mu: int | None = None  # size of the condensed system
+    nnz: int | None = None
+
+    def _present(self) -> list[str]:
+        return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
+
+    def __getitem__(self, key: str):
+        if key in self._present():
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def __iter__(self):
+        return iter(self._present())
+
+    def __len__(self) -> int:
+        return len(self._present())
+
+    def replace(self, **changes) -> SolverStats:
+        return dataclasses.replace(self, **changes)
+
+    def __repr__(self) -> str:  # the fields that apply; arrays by their shape
+        shown = (f"{k}=<array {v.shape}>" if isinstance(v, np.ndarray) else f"{k}={v!r}" for k, v in self.items())
+        return f"SolverStats({', '.join(shown)})"
+
+
 def load_scale(system: System) -> float:
     """``F_ref = sum |f|``: the size of the applied loads (or of the stress scale if unloaded)."""
     return float(np.abs(system.f).sum()) or system.scales.stress * system.scales.length
@@ -62,7 +125,7 @@ class Solution:
     system: System
     stress: np.ndarray
     displacement: np.ndarray
-    solver: dict
+    solver: SolverStats
     timings: dict
     objective: float
     duality_gap: float
@@ -124,10 +187,10 @@ class Solution:
             "n_contact_pairs": len(s.jb),
             "h": s.mesh.h,
             "h_min": s.mesh.h_min,
-            "solver": self.solver.get("solver"),
-            "fallback": self.solver.get("fallback"),
-            "status": self.solver.get("status"),
-            "iterations": self.solver.get("iterations"),
+            "solver": self.solver.solver,
+            "fallback": self.solver.fallback,
+            "status": self.solver.status,
+            "iterations": self.solver.iterations,
             "objective": self.objective,
             "duality_gap": self.duality_gap,
             "load_imbalance": self.space.load_imbalance if eq else s.load_imbalance,
@@ -139,183 +202,6 @@ class Solution:
             "checks_skipped": {} if self.checks is None else dict(self.checks["skipped"]),
             "timings": dict(self.timings),
         }
-
-
-def admissibility(system: System, t: np.ndarray):
-    """Residual vector ``R = Z^T (E t - f)`` of stresses ``t`` ``(n_pieces, 3)``, and its scale
-    ``Z^T (|E| |t| + |f|)`` for relative measures."""
-    tv = t.ravel()
-    ZT = system.Z.T
-    R = ZT @ (system.E @ tv - system.f)
-    scale = ZT @ (abs(system.E) @ np.abs(tv) + np.abs(system.f))
-    return R, scale
-
-
-def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=None, adhesion=None,
-                       displacements: bool = True) -> dict:
-    """Nodal contact forces, pressures, gaps, the active set and the tangential state, from
-    the residual ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``.
-
-    ``friction`` (Tresca ``g`` per pair) and ``adhesion`` (``sigma_a`` per pair) are those of
-    the problem solved: a pair is active where its force exceeds ``-sigma_a w`` and sticks
-    where it is active and its tangential force is below ``g w`` (each judged, like the
-    normal state, against the slip relative to its scale)."""
-    force = -R[system.jb]
-    up, lo = system.mesh.pairs.T
-    q = u.reshape(-1, 2)
-    rel = q[lo, 1] - q[up, 1]
-    pressure = force / system.width
-    held = force if adhesion is None else force + adhesion * system.width  # force above the cut-off
-    fmax = max(float(held.max()) if len(held) else 0.0, FORCE_FLOOR * load_scale(system))
-    delta = _delta(system, u, system.eps)
-    opening = system.eps - rel
-    # complementarity makes force or opening zero; an interior point leaves both small, and the
-    # larger of the two (each relative to its scale) tells the state
-    active = held > ACTIVE_TOL * fmax
-    if displacements:
-        active &= held / fmax > opening / delta
-    _, jxb, slides = system.pair_x_dofs
-    tangential = np.where(slides, R[np.where(slides, jxb, 0)], 0.0)  # R''_x(B_k): x force on the lower body
-    slip = q[lo, 0] - q[up, 0]
-    if friction is None:
-        stick = np.zeros(len(force), bool)
-    else:
-        with np.errstate(invalid="ignore"):  # g = inf: the reserve is inf, the pair sticks
-            reserve = (friction * system.width - np.abs(tangential)) / fmax
-        # without displacements, by the reserve alone (as the normal state by the force alone)
-        stick = active & slides & (reserve > (np.abs(slip) / delta if displacements else ACTIVE_TOL))
-    xs = system.mesh.pair_x[active]
-    return {
-        "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
-        "force": force, "pressure": pressure, "active": active,
-        "tangential_force": tangential, "slip": slip, "stick": stick,
-        "reaction": R[system.ja],  # y force on the upper body: +force (action = reaction)
-        "n_active": int(active.sum()),
-        "x_min": float(xs.min()) if len(xs) else None,
-        "x_max": float(xs.max()) if len(xs) else None,
-        "max_pressure": float(pressure.max()) if len(pressure) else 0.0,
-        "total_force": float(force.sum()),
-    }
-
-
-def edge_contact(system, p: np.ndarray, v: np.ndarray | None = None, load: float = 1.0) -> dict:
-    """Contact quantities of linear contact pressures ``p`` ``(n_c, 2)`` (at both ends of each
-    contact edge), defined as for P0 (:func:`cvxdual.solution.contact_quantities`): the nodal
-    force ``int p phi_k dx`` at each pair and the pressure per tributary length; a pair is active
-    where the pressure at it (from either adjacent edge) is positive beyond rounding of the load
-    scale (``load`` times the scene's). ``v``: displacements for the relative displacement and
-    slip, or ``None`` (zeros). The equilibrium space is frictionless: no tangential force."""
-    x = system.mesh.pair_x
-    d = np.diff(x)
-    force = np.zeros(len(x))
-    force[:-1] += d * (2 * p[:, 0] + p[:, 1]) / 6.0
-    force[1:] += d * (p[:, 0] + 2 * p[:, 1]) / 6.0
-    at_pair = np.zeros(len(x))
-    at_pair[:-1] = p[:, 0]
-    at_pair[1:] = np.maximum(at_pair[1:], p[:, 1])
-    floor = FORCE_FLOOR * load * load_scale(system) / max(float(x[-1] - x[0]), 1e-300)
-    active = at_pair > ACTIVE_TOL * max(float(at_pair.max(initial=0.0)), floor)
-    n = len(x)
-    up, lo = system.mesh.pairs.T
-    rel, slip = (np.zeros(n), np.zeros(n)) if v is None else (v[lo, 1] - v[up, 1], v[lo, 0] - v[up, 0])
-    pressure = force / system.width
-    xs = x[active]
-    return {"x": x, "gap": system.eps, "relative_displacement": rel, "force": force, "pressure": pressure,
-            "active": active, "edge_pressure": p, "tangential_force": np.zeros(n), "slip": slip,
-            "stick": np.zeros(n, bool), "n_active": int(active.sum()),
-            "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
-            "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
-
-
-def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=None) -> dict:
-    """Relative residuals of a dual solution ``t`` with recovered displacements ``u``.
-
-    - equilibrium: largest violation of ``(T^T R)_j = 0`` (every ``j`` not in ``J-``, the
-      anchors included, so the dropped rows are checked too) and ``(T^T R)_m <= 0`` (``m`` in
-      ``J-``), over the largest term of ``Z^T (|E||t| + |f|)``;
-    - constitutive: ``||t - C B u||_0 / ||t||_0``;
-    - complementarity: ``sum |F_k s_k| / (sum |F_k| * delta)``, ``s_k = eps_k - (u''_y - u'_y)``,
-      ``delta`` the largest displacement or gap;
-    - penetration: ``max(0, -s_k) / delta``.
-
-    Force denominators are floored (``F_ref = sum |f|``, the load scale: ``1e-6 F_ref`` for nodal
-    forces, ``1e-3 F_ref`` for the total contact force) so that a solution with (almost) no
-    contact is not judged on rounding noise.
-    """
-    R, scale = admissibility(system, t) if adm is None else adm
-    f_ref = load_scale(system)
-    Ry = system.T.T @ R
-    viol = np.abs(Ry)
-    viol[system.jb] = np.maximum(Ry[system.jb], 0.0)
-    eq = float(viol.max() / max(scale.max(), 1e-6 * f_ref)) if len(viol) else 0.0
-    sc = system.scales
-    tu = system.stresses_from_displacement(u)
-    a = system.pieces.area[:, None]
-    num = np.sqrt(np.sum(a * VOIGT_WEIGHT * (t - tu) ** 2))
-    den = np.sqrt(np.sum(a * VOIGT_WEIGHT * t**2))
-    # floors: the problem's own stress and displacement scales (an unloaded scene has t = u = 0)
-    cons = float(num / max(den, 1e-12 * sc.stress * sc.length))
-    return {"equilibrium": eq, "constitutive": cons, "complementarity": complementarity(system, u, contact),
-            "penetration": penetration(system, u, contact), "duality_gap": duality_gap(system, t, u)}
-
-
-def _delta(system: System, u: np.ndarray, gap: np.ndarray) -> float:
-    """The displacement scale: the largest displacement or gap (floored by the problem's)."""
-    return max(float(np.abs(u).max()), float(np.abs(gap).max(initial=0.0)), system.scales.displacement)
-
-
-def complementarity(system: System, u: np.ndarray, contact: dict, force: np.ndarray | None = None) -> float:
-    """``sum |F_k s_k| / (sum |F_k| delta)`` with the openings ``s_k``; ``force`` replaces
-    ``contact["force"]`` (adhesion: the force above the cut-off)."""
-    F = contact["force"] if force is None else force
-    s = contact["gap"] - contact["relative_displacement"]
-    fsum = max(float(np.abs(F).sum()), FORCE_FLOOR * load_scale(system))
-    return float(np.sum(np.abs(F * s)) / (fsum * _delta(system, u, contact["gap"])))
-
-
-def penetration(system: System, u: np.ndarray, contact: dict) -> float:
-    """``max(0, -min_k s_k) / delta``."""
-    s = contact["gap"] - contact["relative_displacement"]
-    return float(max(0.0, -s.min()) / _delta(system, u, contact["gap"])) if len(s) else 0.0
-
-
-def dual_objective(system: System, t: np.ndarray) -> float:
-    """``S(t) = 1/2 t.A_h t - t.E^T q0`` (docs/theory.md#discretisation)."""
-    tv = t.ravel()
-    return 0.5 * float(tv @ (system.Ah @ tv)) - float(tv @ (system.E.T @ system.q0))
-
-
-def duality_gap(system: System, t: np.ndarray, u: np.ndarray, extra: float = 0.0) -> float:
-    """``|J(u_h) + L(u0) + S(lam_h)|`` relative to the complementary energy
-    (docs/theory.md#primal-and-dual-problems); ``extra`` is what a reformulation adds to ``J``
-    (friction dissipation, adhesion work)."""
-    tv = t.ravel()
-    energy = 0.5 * float(tv @ (system.Ah @ tv))
-    objective = energy - float(tv @ (system.E.T @ system.q0))
-    sc = system.scales
-    val = system.energy(u) + extra + float(system.f @ system.q0) + objective
-    return abs(val) / max(energy, abs(objective), 1e-12 * sc.stress**2 * sc.length**2 / sc.modulus)
-
-
-def evaluate(system: System, t: np.ndarray, u: np.ndarray, info: dict, friction=None, adhesion=None,
-             displacements: bool = True) -> dict:
-    """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
-    displacements ``u``: every field of a :class:`Solution` that the solve itself does not give,
-    and ``timings["error"]``, the time of the error against the exact field (``friction``,
-    ``adhesion``, ``displacements``: see :func:`contact_quantities`)."""
-    scene = system.mesh.scene
-    adm = admissibility(system, t)
-    contact = contact_quantities(system, adm[0], u, friction, adhesion, displacements)
-    res = residuals(system, t, u, contact, adm)
-    exact = exact_field(scene)
-    error, t0 = None, time.perf_counter()
-    if exact is not None:
-        error = stress_error(system, t, exact.stress)
-    return {"timings": {"error": time.perf_counter() - t0},  # a diagnostic: shown apart
-            "scene": scene, "system": system, "stress": t, "displacement": u.reshape(-1, 2), "solver": info,
-            "objective": dual_objective(system, t), "duality_gap": res["duality_gap"], "residuals": res,
-            "contact": contact, "exact": exact.data() if exact is not None else None,
-            "error": error}
 
 
 def tolerances(sol: Solution) -> dict:
@@ -332,7 +218,7 @@ def failed_checks(applied: dict, tol: dict) -> str:
 def check_solution(sol: Solution) -> None:
     txt = failed_checks(sol.residuals if sol.checks is None else sol.checks["applied"], tolerances(sol))
     if txt:
-        name = str(sol.solver.get("solver"))
+        name = sol.solver.solver
         frictionless = sol.scene.friction is None  # the fast path is frictionless: not advised under friction
         advice = ({"api": "try solver='fast', or a coarser mesh", "cli": "try --solver fast, or a coarser mesh"}
                   if name.upper() == "CLARABEL" and frictionless else

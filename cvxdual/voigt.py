@@ -1,4 +1,5 @@
-"""Stress measures per piece: in-plane maximum shear and von Mises with ``s33``.
+"""Voigt stresses ``(s11, s22, s12)``: the inner product ``sigma:tau`` and the stress measures
+(in-plane maximum shear, von Mises with ``s33``).
 
 In plane strain ``e33 = 0`` gives ``s33 = nu (s11 + s22)``; in plane stress ``s33 = 0``. The
 numpy functions here are the twins of the CVXPY expressions of :class:`cvxdual.DualModel`
@@ -10,6 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ModelError
+
+__all__ = ["VOIGT_WEIGHT", "body_factors", "out_of_plane_factor", "shear_stress", "von_mises"]
+
+VOIGT_WEIGHT = np.array([1.0, 1.0, 2.0])  # sigma:tau = sum(VOIGT_WEIGHT * sigma * tau) in Voigt form
 
 
 def body_factors(scene) -> np.ndarray:

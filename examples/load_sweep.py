@@ -56,8 +56,7 @@ from pathlib import Path
 import numpy as np
 
 import cvxdual
-from cvxdual.files import atomic_path, write_text
-from cvxdual.reference.hertz import HertzData, hertz_line_contact
+from cvxdual.reference import HertzData, hertz_line_contact
 
 SCENE = "hertz"
 
@@ -233,8 +232,7 @@ def main(argv=None) -> dict:
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11.0, 4.0), layout="constrained")
     plot_half_width(r, ax=ax0)
     plot_compile_times(r, ax=ax1)
-    with atomic_path(out / "load_sweep.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=150)
+    fig.savefig(out / "load_sweep.png", format="png", dpi=150)
     plt.close(fig)
     lines = ["lf,load,half_width,hertz_a,spacing,error_spacings,total_force,compile_time_s,solve_time_s,"
              "iterations,same_program"]
@@ -243,7 +241,7 @@ def main(argv=None) -> dict:
                      f"{r['spacing'][i]:.10g},{r['error_spacings'][i]:.6g},{r['total_force'][i]:.12g},"
                      f"{r['compile_time'][i]:.6g},{r['solve_time'][i]:.6g},{r['iterations'][i]},"
                      f"{int(r['same_program'][i])}")
-    write_text(out / "load_sweep.csv", "\n".join(lines) + "\n")
+    (out / "load_sweep.csv").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'load_sweep.png'} and {out / 'load_sweep.csv'}")
     return r
 

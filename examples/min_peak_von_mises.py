@@ -60,8 +60,7 @@ import cvxpy as cp
 import numpy as np
 
 import cvxdual
-from cvxdual.files import atomic_path, write_text
-from cvxdual.reference.hertz import mcewen_stress
+from cvxdual.reference import mcewen_stress
 from cvxdual.voigt import out_of_plane_factor, von_mises
 
 SCENE = "hertz"
@@ -243,8 +242,7 @@ def main(argv=None) -> dict:
     plot_ratio(p0, eq, exact, axes[0, 0])
     if p0:
         plot_pressure(p0[-1], eq[-1] if eq else None, axes[0, 1])
-    with atomic_path(out / "min_peak_von_mises.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=150)
+    fig.savefig(out / "min_peak_von_mises.png", format="png", dpi=150)
     plt.close(fig)
     lines = ["space,level,unknowns,elastic_peak,min_peak,ratio_to_elastic,ratio_to_exact_elastic,"
              "contact_extent,equilibrium_residual,time_s"]
@@ -256,7 +254,7 @@ def main(argv=None) -> dict:
         lines.append(f"eq,{r['level']},{r['n_unknowns']},{exact:.10g},{r['certified']:.10g},"
                      f"{r['certified'] / exact:.10g},{r['certified'] / exact:.10g},,{r['residual']:.3g},"
                      f"{r['time']:.4g}")
-    write_text(out / "min_peak_von_mises.csv", "\n".join(lines) + "\n")
+    (out / "min_peak_von_mises.csv").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'min_peak_von_mises.png'} and {out / 'min_peak_von_mises.csv'}")
     return {"p0": p0, "eq": eq, "exact_elastic_peak": exact}
 

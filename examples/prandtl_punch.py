@@ -71,7 +71,6 @@ from pathlib import Path
 import numpy as np
 
 import cvxdual
-from cvxdual.files import atomic_path, write_text
 from cvxdual.voigt import shear_stress
 
 K = 1.0  # shear yield stress k
@@ -211,15 +210,14 @@ def main(argv=None) -> list[dict]:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(5.5, 4.0), layout="constrained")
     plot_ratio(eq, p0, ax=ax)
-    with atomic_path(out / "prandtl.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=150)
+    fig.savefig(out / "prandtl.png", format="png", dpi=150)
     plt.close(fig)
     lines = ["level,n_unknowns,alpha,alpha_certified,ratio,error_percent,time_s,max_tau,residual,p0_status,p0_alpha"]
     for r, q in zip(eq, p0, strict=True):
         lines.append(f"{r['level']},{r['n_unknowns']},{r['alpha']:.10g},{r['alpha_certified']:.10g},"
                      f"{r['ratio']:.10g},{100 * (r['ratio'] - 1):.6g},{r['time']:.4g},{r['max_tau']:.12g},"
                      f"{r['residual']:.3g},{q['status']},{'' if q['alpha'] is None else repr(q['alpha'])}")
-    write_text(out / "prandtl.csv", "\n".join(lines) + "\n")
+    (out / "prandtl.csv").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'prandtl.png'} and {out / 'prandtl.csv'}")
     return eq
 

@@ -16,7 +16,7 @@ a norm of an affine map of ``s`` (convex, one second-order cone per piece):
 
 Elastic peak
 ------------
-Of the exact field (:func:`cvxdual.reference.hertz.mcewen_stress`) the peak lies on the symmetry axis,
+Of the exact field (:func:`cvxdual.reference.mcewen_stress`) the peak lies on the symmetry axis,
 below the surface: ``vm = 0.557 p0`` at depth ``z = 0.70 a`` for ``nu = 0.3`` (Johnson,
 *Contact Mechanics*, 1985, section 5.6: about ``0.56 p0`` at ``0.70 a``). :func:`exact_peak`
 computes it; the piecewise-constant (P0) solution's largest piece value comes within about 0.5 %.
@@ -62,9 +62,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 import cvxdual
-from cvxdual.files import atomic_path, write_text
-from cvxdual.geometry.pieces import piece_outlines
-from cvxdual.reference.hertz import mcewen_stress
+from cvxdual.reference import mcewen_stress
 from cvxdual.voigt import out_of_plane_factor, von_mises
 
 SCENE = "hertz"
@@ -106,7 +104,7 @@ def cap_study(level: int, fraction: float = CAP_FRACTION, scene=SCENE) -> dict:
     (``twin_difference``, relative), ``elastic_peak`` with its ``peak_depth``, ``cap``,
     ``capped_peak``, ``at_cap`` (mask of pieces within :data:`AT_CAP` of the cap), the energies
     ``energy_elastic``, ``energy_capped`` (per unit thickness, N mm/mm), the solve times, the exact
-    peak (``exact_peak``, ``exact_depth``), ``hertz`` (:class:`~cvxdual.reference.hertz.HertzData`), the two
+    peak (``exact_peak``, ``exact_depth``), ``hertz`` (:class:`~cvxdual.reference.HertzData`), the two
     solutions' checks (``checks_elastic``, ``checks``), ``model`` and ``system``.
     """
     model = cvxdual.build_model(scene, level=level)
@@ -144,17 +142,6 @@ def cap_study(level: int, fraction: float = CAP_FRACTION, scene=SCENE) -> dict:
             "centroids": centre, "model": model, "system": s}
 
 
-def _piece_polygons(system) -> tuple[list[np.ndarray], np.ndarray]:
-    """Polygons of all pieces (straight triangles, then curved pieces along the face) and the
-    piece of each."""
-    p = system.pieces
-    polys, ids = list(p.tri_vertices), [p.tri_piece]
-    for pid, poly in piece_outlines(p):
-        polys += list(poly)
-        ids.append(pid)
-    return polys, np.concatenate(ids)
-
-
 def region_outline(system, mask: np.ndarray) -> np.ndarray:
     """Segments ``(m, 2, 2)`` bounding the union of the (straight) triangle pieces in ``mask``:
     the edges that belong to exactly one of them."""
@@ -181,7 +168,7 @@ def plot_map(r: dict, which: str = "capped", ax=None, norm=None):
     if ax is None:
         ax = plt.figure(figsize=(4.0, 6.0)).add_subplot()
     vm = r["vm_" + which]
-    polys, ids = _piece_polygons(r["system"])
+    polys, ids = r["system"].pieces.polygons()
     norm = norm or Normalize(0.0, r["elastic_peak"])
     # no edges and no antialiasing: flat colours without seams between pieces
     ax.add_collection(PolyCollection(polys, array=vm[ids], cmap="viridis", norm=norm, linewidths=0,
@@ -274,8 +261,7 @@ def main(argv=None) -> list[dict]:
     fig.colorbar(axes[1].collections[0], ax=axes[:2], shrink=0.8, label="von Mises [MPa]")
     fig.suptitle(f"Hertz line contact, level {r['level']}: von Mises capped at {args.cap:g} x elastic peak "
                  "(least complementary energy, not elastoplastic)", fontsize=10)
-    with atomic_path(out / "von_mises_cap.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=150)
+    fig.savefig(out / "von_mises_cap.png", format="png", dpi=150)
     plt.close(fig)
     lines = ["level,n_pieces,p0,a,exact_peak,exact_depth,elastic_peak,elastic_peak_depth,cap,capped_peak,"
              "n_at_cap,energy_elastic,energy_capped,energy_increase,time_elastic_s,time_capped_s,"
@@ -288,7 +274,7 @@ def main(argv=None) -> list[dict]:
                      f"{q['energy_capped']:.12g},{q['energy_capped'] - q['energy_elastic']:.10g},"
                      f"{q['time_elastic']:.4g},{q['time_capped']:.4g},{q['checks']['applied']['equilibrium']:.3g},"
                      f"{';'.join(q['checks']['skipped'])}")
-    write_text(out / "von_mises_cap.csv", "\n".join(lines) + "\n")
+    (out / "von_mises_cap.csv").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'von_mises_cap.png'} and {out / 'von_mises_cap.csv'}")
     return results
 

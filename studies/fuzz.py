@@ -2,14 +2,14 @@
 
     python studies/fuzz.py --minutes 10 --levels 0 1 2 --seed 1 --out reports
 
-Until the time budget ends, random cases (a built-in scene perturbed by cvxdual.testing.perturb,
+Until the time budget ends, random cases (a built-in scene perturbed by fuzzing.perturb,
 a level, a triangulation, the fast path or CLARABEL, sometimes stress space "eq" on flat-face
 scenes) run through cvxdual.solve, each in a worker process with a time limit (a hang or a
 killed worker costs one case) and an address-space limit (a huge mesh raises MemoryError
 instead of exhausting the machine). Outcomes: ok, rejected:<CvxdualError subclass>, timeout,
 fallback (the fast path failed and solve() handed over to CLARABEL, which solved), and the
 findings: exception:<type> (any other exception; traceback saved), nan (a returned result fails
-cvxdual.testing.check_result), fast-accuracy-while-clarabel-ok (the fast path raised
+fuzzing.check_result), fast-accuracy-while-clarabel-ok (the fast path raised
 AccuracyError/SolverError where CLARABEL solves within tolerances), bad-message (a CvxdualError
 message of several lines or >= 500 characters), out-of-memory (a MemoryError, even one turned
 into a CvxdualError: the size check let the case through), crash (the worker died).
@@ -31,7 +31,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 import numpy as np
-from cvxdual.testing import check_result, perturb
+from fuzzing import check_result, perturb  # studies/fuzzing.py, beside this script
 
 import cvxdual as cd
 from cvxdual.files import write_text
@@ -52,8 +52,8 @@ def run_case(case: dict) -> dict:
         data = perturb(builtin_data(case["scene"]), np.random.default_rng(case["seed"]), case["hostility"])
         sol = solve(data, case, case["solver"])
         problems = check_result(sol)
-        if sol.solver.get("fallback"):  # the fast path failed and CLARABEL solved instead: not a finding
-            out.update(outcome="fallback", detail=str(sol.solver["fallback"])[:300])
+        if sol.solver.fallback:  # the fast path failed and CLARABEL solved instead: not a finding
+            out.update(outcome="fallback", detail=sol.solver.fallback[:300])
         if problems:
             nan = any("non-finite" in p or "nan" in p or "inf" in p for p in problems)
             out.update(outcome="nan" if nan else "bad-result", detail="; ".join(problems))

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .solution import tolerances
+from cvxdual.solution import tolerances
 
 HOSTILE = (0, 0.0, -1.0, 1e308, -1e308, 1e-320, math.nan, math.inf, -math.inf, 10**400, -(10**400),
            "abc", "", "1e3", True, False, None, [], [1.0, 2.0], {}, {"kind": "flat"})
@@ -236,8 +236,8 @@ def check_result(sol) -> list[str]:
             problems.append(f"summary {key} is null")
         elif isinstance(v, (float, np.floating, np.ndarray)) and not np.all(np.isfinite(v)):
             problems.append(f"summary {key} = {v}")
-    if sol.solver.get("status") != "optimal":
-        problems.append(f"status {sol.solver.get('status')!r}")
+    if sol.solver.status != "optimal":
+        problems.append(f"status {sol.solver.status!r}")
     for k, t in tolerances(sol).items():
         v = sol.residuals.get(k)
         if not (_is_number(v) or isinstance(v, np.floating)) or not v <= t:

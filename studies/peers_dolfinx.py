@@ -1,4 +1,4 @@
-"""The dolfinx peer of ``cvxdual study peers`` (:mod:`cvxdual.study.peers`), run by the python of
+"""The dolfinx peer of the peers study (``studies/peers.py``), run by the python of
 the peer's own virtual environment. It must not import cvxdual: numpy and the dolfinx stack only.
 
     python -I peers_dolfinx.py --data DIR --jit-cache DIR [--load ufl|exported]

@@ -8,6 +8,7 @@ pyproject.toml), and the session fails if anything else appeared (``git status``
 import contextlib
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -15,6 +16,8 @@ import pytest
 from hypothesis.configuration import set_hypothesis_home_dir
 
 ROOT = Path(__file__).resolve().parents[1]
+# the project's study code (fuzzing, peers, specs) lives beside the tests, outside the package
+sys.path.insert(0, str(ROOT / "studies"))
 # Hypothesis keeps its example database and constants under .hypothesis/ of the working directory
 HYPOTHESIS_HOME = tempfile.mkdtemp(prefix="cvxdual-tests-hypothesis-")
 set_hypothesis_home_dir(HYPOTHESIS_HOME)

@@ -1,17 +1,58 @@
-"""The package's shape: data flows one way (no import cycles), the fast path works on an
-assembled system only, and no module uses another module's private names."""
+"""The package's shape: the folders are the data flow, each layer imports only layers below it
+(so there are no import cycles), no module uses another module's private names, public names do
+not collide, examples and docs use the public API only, the active-set iteration lives in one
+place, and nothing of the package installs software."""
 
 import ast
+import collections
 import pathlib
+import re
 
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[1] / "cvxdual"
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PKG = ROOT / "cvxdual"
+
+# Layers, lowest first. A unit (a subpackage, or a top-level module) may import units of lower
+# layers and its own modules, never a unit of its own layer or above. This is the data flow:
+# scene -> reference -> geometry -> linalg -> solution -> model/fast -> p0 -> eq -> pipeline ->
+# outputs -> study -> cli.
+LAYERS = [
+    {"errors"},
+    {"validate", "voigt"},
+    {"files", "progress"},
+    {"scene"},  # what the user describes
+    {"reference"},  # closed forms a scene may declare
+    {"geometry"},  # meshes, pieces, loads, rigid motions
+    {"linalg", "sizing"},
+    {"solution"},  # the result type and tolerances of both stress spaces
+    {"model", "fast"},  # the CVXPY layer and the active-set core, over no stress space
+    {"p0"},  # the paper's stress space: assembly, model, fast solver, run
+    {"eq"},  # the equilibrium space, built on the P0 mesh and displacement
+    {"pipeline"},  # the entry points
+    {"outputs"},
+    {"study"},
+    {"cli"},
+]
+RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 
 
 def _modules() -> dict[str, pathlib.Path]:
-    return {".".join(f.relative_to(ROOT.parent).with_suffix("").parts).removesuffix(".__init__"): f
-            for f in ROOT.rglob("*.py")}
+    return {".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): f
+            for f in PKG.rglob("*.py")}
+
+
+def _type_checking(node) -> bool:
+    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+
+
+def _walk(tree):
+    """Every node except those under ``if TYPE_CHECKING:`` (annotations only: nothing runs)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        yield node
+        todo.extend(c for c in ast.iter_child_nodes(node) if not _type_checking(c))
 
 
 def _imports(name: str, path: pathlib.Path, mods) -> list[tuple[str, list[str]]]:
@@ -19,7 +60,7 @@ def _imports(name: str, path: pathlib.Path, mods) -> list[tuple[str, list[str]]]
     (imports inside functions count: they make cycles too)."""
     pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     out = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in _walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.level:
             parts = pkg.split(".")
             base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
@@ -28,12 +69,56 @@ def _imports(name: str, path: pathlib.Path, mods) -> list[tuple[str, list[str]]]
                 out.append((sub, []) if sub in mods else (base, [a.name]))
         elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("cvxdual"):
             out.append((node.module, [a.name for a in node.names]))
+        elif isinstance(node, ast.Import):
+            out += [(a.name, []) for a in node.names if a.name.startswith("cvxdual")]
     return out
 
 
 def _graph():
     mods = _modules()
     return {m: _imports(m, f, mods) for m, f in mods.items()}, mods
+
+
+def _unit(module: str) -> str | None:
+    """The layer unit of a module: ``cvxdual.eq.space`` -> ``eq``; None for ``cvxdual`` itself."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def layering_violations(graph) -> list[str]:
+    """``"a -> b"`` for every import of a unit by a unit of the same or a lower layer."""
+    bad = []
+    for m, imps in graph.items():
+        u = _unit(m)
+        if u is None:
+            continue  # the package's __init__: the public surface, above everything
+        for target, _ in imps:
+            v = _unit(target)
+            if v is None or v == u:
+                continue
+            if RANK[v] >= RANK[u]:
+                bad.append(f"{m} -> {target}")
+    return sorted(set(bad))
+
+
+def test_every_unit_has_a_layer():
+    units = {_unit(m) for m in _modules()} - {None}
+    assert units <= set(RANK), f"modules with no layer: {sorted(units - set(RANK))}; add them to LAYERS"
+
+
+def test_layers_import_only_lower_layers():
+    graph, _ = _graph()
+    assert layering_violations(graph) == []
+
+
+def test_the_layering_test_catches_an_upward_import():
+    """The check itself: a geometry module importing the pipeline, or two units of one layer
+    importing each other, is a violation."""
+    graph, _ = _graph()
+    graph = {**graph, "cvxdual.geometry.mesh": graph["cvxdual.geometry.mesh"] + [("cvxdual.pipeline", ["solve"])],
+             "cvxdual.fast.core": graph["cvxdual.fast.core"] + [("cvxdual.model.base", [])]}
+    assert layering_violations(graph) == ["cvxdual.fast.core -> cvxdual.model.base",
+                                          "cvxdual.geometry.mesh -> cvxdual.pipeline"]
 
 
 def test_no_import_cycles():
@@ -60,11 +145,13 @@ def test_no_import_cycles():
 
 
 @pytest.mark.parametrize("module, forbidden", [
-    ("cvxdual.p0.fast", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation", "cvxdual.scene.scenefile", "cvxdual.p0.dual"}),
-    ("cvxdual.p0.assembly", {"cvxdual.p0.dual", "cvxdual.p0.fast", "cvxdual.pipeline"}),
+    # the fast paths work on an assembled system or space only
+    ("cvxdual.p0.fast", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation", "cvxdual.scene.scenefile",
+                         "cvxdual.p0.dual"}),
+    ("cvxdual.p0.assembly", {"cvxdual.p0.dual", "cvxdual.p0.fast", "cvxdual.p0.run"}),
     ("cvxdual.outputs.plots", {"cvxdual.outputs.output_set"}),
 ])
-def test_layering(module, forbidden):
+def test_layering_within_units(module, forbidden):
     graph, _ = _graph()
     assert not {t for t, _ in graph[module]} & forbidden
 
@@ -74,6 +161,95 @@ def test_no_private_names_across_modules():
     leaks = [(m, t, n) for m, imps in graph.items() for t, names in imps for n in names
              if n.startswith("_") and t != m]
     assert not leaks
+
+
+def _top_level_names(path: pathlib.Path) -> set[str]:
+    names = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            names.add(node.name)
+    return {n for n in names if not n.startswith("_")}
+
+
+# the same name for the same role in each unit: a parser's entry and the CLI's `main`
+SHARED_ROLES = {"main", "add_parser"}
+
+
+def test_public_functions_and_classes_have_one_home():
+    """No two modules define a public function or class of the same name (``residuals`` in two
+    places, say): a reader, and an import, would not know which one is meant."""
+    homes = collections.defaultdict(list)
+    for m, f in _modules().items():
+        for n in _top_level_names(f) - SHARED_ROLES:
+            homes[n].append(m)
+    assert {n: ms for n, ms in homes.items() if len(ms) > 1} == {}
+
+
+def _docs_code() -> list[tuple[str, str]]:
+    """``(where, code)``: every example script and every fenced python block of the docs."""
+    out = [(str(p.relative_to(ROOT)), p.read_text()) for p in sorted((ROOT / "examples").glob("*.py"))]
+    for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        for i, block in enumerate(re.findall(r"```python\n(.*?)```", p.read_text(), re.S)):
+            out.append((f"{p.relative_to(ROOT)} block {i}", block))
+    return out
+
+
+PUBLIC_MODULES = {"cvxdual", "cvxdual.errors", "cvxdual.scene", "cvxdual.reference", "cvxdual.voigt",
+                  "cvxdual.outputs", "cvxdual.study"}
+
+
+@pytest.mark.parametrize("where, code", _docs_code(), ids=lambda v: v if isinstance(v, str) and len(v) < 60 else "")
+def test_examples_and_docs_use_the_public_api(where, code):
+    """Examples and documented code import from the public modules only, names in their
+    ``__all__``, and use ``cvxdual.NAME`` only for names in ``cvxdual.__all__``."""
+    import importlib
+    tree = ast.parse(code)
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("cvxdual"):
+            if node.module not in PUBLIC_MODULES:
+                bad.append(f"from {node.module} import ...")
+                continue
+            public = set(importlib.import_module(node.module).__all__)
+            bad += [f"from {node.module} import {a.name}" for a in node.names if a.name not in public]
+        elif isinstance(node, ast.Import):
+            bad += [f"import {a.name}" for a in node.names
+                    if a.name.startswith("cvxdual") and a.name not in PUBLIC_MODULES]
+    import cvxdual
+    aliases = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+               if a.name == "cvxdual"}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases:
+            if node.attr not in cvxdual.__all__ and node.attr not in ("__version__",) \
+                    and f"cvxdual.{node.attr}" not in PUBLIC_MODULES:
+                bad.append(f"cvxdual.{node.attr}")
+    assert bad == [], f"{where} uses non-public names"
+
+
+def test_all_names_exist():
+    import importlib
+    for m in sorted(PUBLIC_MODULES):
+        mod = importlib.import_module(m)
+        for n in getattr(mod, "__all__", []):
+            assert getattr(mod, n, None) is not None, f"{m}.__all__ names {n!r}, which it lacks"
+
+
+def test_active_set_iteration_lives_in_the_core():
+    """Both fast solvers iterate with :func:`cvxdual.fast.core.iterate` and complete their sets
+    with its ``cover``; no other module has an iteration limit or a cycle test of its own."""
+    src = {m: f.read_text() for m, f in _modules().items()}
+    for m in ("cvxdual.p0.fast", "cvxdual.eq.fast"):
+        assert re.search(r"from \.\.fast\.core import .*\biterate\b", src[m]) and "iterate(self" in src[m], m
+        assert re.search(r"from \.\.fast\.core import .*\bcover\b", src[m]), m
+    marks = re.compile(r"MAX_ITER\s*=|\bseen\.add\(|active set cycles|tobytes\(\) in seen")
+    assert sorted(m for m, s in src.items() if marks.search(s)) == ["cvxdual.fast.core"]
+
+
+def test_the_package_installs_nothing():
+    """No module of the package runs pip or another installer (peer benchmarks that do live in
+    studies/, outside the wheel)."""
+    pattern = re.compile(r"""["']-m["']\s*,\s*["'](pip|ensurepip|venv)["']|["'](pip|pip3|uv|conda)["']\s*,\s*["']install""")
+    assert [m for m, f in _modules().items() if pattern.search(f.read_text())] == []
 
 
 @pytest.mark.parametrize("plots", [False, True])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.eq.bounds import residuals
+from cvxdual.eq.bounds import admissibility_residuals
 from cvxdual.eq.fast import (
     HybridSolver,
     active_from_pairs,
@@ -85,7 +85,7 @@ def test_agrees_with_cvxpy(scene, level):
 def test_exact_after_post_step(scene):
     sp = space(scene, 1)
     y, info = fast(scene, 1)
-    res = residuals(sp, sp.stresses(y))
+    res = admissibility_residuals(sp, sp.stresses(y))
     assert max(res.values()) < EXACT, res
     assert info["max_change"] < 1e-8  # the post-step only repairs rounding (measured <= 1e-9)
 

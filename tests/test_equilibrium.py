@@ -10,17 +10,16 @@ import scipy.sparse as sp
 
 import cvxdual as cd
 from cvxdual.eq.bounds import (
+    admissibility_residuals,
     admissible_displacement,
     certified_bounds,
     constraint_blocks,
     contact_slack,
     exact_errors,
-    residuals,
-    vtu_cells,
 )
 from cvxdual.eq.element import divergence_rows, edge_dof_rows, internal_rows, local_basis
 from cvxdual.eq.model import EquilibriumModel
-from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_modes
+from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_motions
 from cvxdual.errors import SceneError
 from cvxdual.geometry.boundary import supported
 
@@ -76,7 +75,7 @@ def test_no_spurious_modes(scene, floating):
     vertical translation). Equivalently the displacement multipliers are unique up to those
     motions: no spurious kinematic mode, and the reduced div system has the same defect."""
     space = EquilibriumSpace.from_scene(cd.load_scene(scene), 0)
-    assert rigid_modes(space.mesh, joint=True).shape[2] == floating
+    assert rigid_motions(space.mesh, joint=True).shape[2] == floating
     blocks = constraint_blocks(space)
     M = sp.vstack([m for m, _, sense in blocks.values() if sense == "=="]).tocsr()
     for G in ((M @ M.T).toarray(), (space.div @ space.stress_map).toarray()):
@@ -112,7 +111,7 @@ def test_patch_exact(level):
 @pytest.mark.parametrize("scene", ["hertz", "blocks"])
 def test_every_constraint_exact_after_post_step(scene):
     space, model = eq(scene, 1)
-    res = residuals(space, model.stresses())
+    res = admissibility_residuals(space, model.stresses())
     assert set(res) == {"internal", "divergence", "shared", "traction", "contact_tangential",
                         "action_reaction", "sign"}
     assert max(res.values()) < EXACT, res
@@ -122,10 +121,10 @@ def test_every_constraint_exact_after_post_step(scene):
     ci = space.contact_y.ravel()
     active = y[ci] < -1e-3 * space.scales.stress
     y[ci[~active]] = 1e-7 * space.scales.stress  # inactive ends pushed into tension
-    bad = residuals(space, space.stress_map @ y + space.sigma0)
+    bad = admissibility_residuals(space, space.stress_map @ y + space.sigma0)
     assert bad["divergence"] > 1e-9 and bad["sign"] > 1e-9  # the perturbation is visible
     fixed, info = make_exact(space, y)
-    good = residuals(space, space.stress_map @ fixed + space.sigma0)
+    good = admissibility_residuals(space, space.stress_map @ fixed + space.sigma0)
     assert max(good.values()) < EXACT, good
     assert np.all(fixed[ci] <= 0)
     assert info["max_change"] < 1e-5  # relative: the repair is of the size of the perturbation
@@ -193,14 +192,6 @@ def test_hertz_errors_and_bounds(level):
     J = hertz_energy()
     # the bracket must contain J(u); its width (> 40) dwarfs the quadrature error of J (< 0.02)
     assert b["energy_lower"] <= J <= b["energy_upper"]
-
-
-def test_vtu_cells():
-    space, model = eq("blocks", 0)
-    out = vtu_cells(space, model.stresses())
-    n_sub = 3 * space.n_tri
-    assert out["points"].shape == (3 * n_sub, 2) and out["cells"].shape == (n_sub, 3)
-    assert out["point_stress"].shape == (3 * n_sub, 3) and set(out["cell_body"]) == {0, 1}
 
 
 def test_unbalanced_loads_refused():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import load_example
 
-from cvxdual.eq.bounds import ADMISSIBLE_TOL, residuals
+from cvxdual.eq.bounds import ADMISSIBLE_TOL, admissibility_residuals
 
 ex = load_example("prandtl_punch")
 
@@ -38,7 +38,7 @@ def test_certified_field_is_exactly_admissible(eq):
         # div sigma = 0, traction continuity, boundary tractions, frictionless compressive contact.
         # ADMISSIBLE_TOL = 1e-12 of the stress scale: what is left is rounding (measured 1.6e-14,
         # a row sums O(10-100) terms in double precision), the solver's 1e-8 errors are gone
-        res = residuals(space, sigma)
+        res = admissibility_residuals(space, sigma)
         assert max(res.values()) < ADMISSIBLE_TOL, res
         assert r["residual"] < ADMISSIBLE_TOL  # model.solution()'s own check of the same field
         # yield at the certified load, checked here from the vertex values (n_sub, 3 vertices, Voigt);

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.p0.norms import VOIGT_WEIGHT
-from cvxdual.solution import TOLERANCES, duality_gap
+from cvxdual.p0.checks import duality_gap
+from cvxdual.solution import TOLERANCES
+from cvxdual.voigt import VOIGT_WEIGHT
 
 SCENES = {
     "dissimilar": [],  # the built-in hertz: E1 = 70 GPa (cylinder), E2 = 210 GPa (block)
@@ -256,7 +257,7 @@ def test_accuracy_advice_under_friction_never_names_the_fast_path():
     scene = cd.load_scene("hertz", overrides=[{"contact": {"friction": {"g": 358.5}}}])
     sol = cd.solve(scene, level=1, check=False)
     for name in ("CLARABEL", "SCS"):
-        bad = replace(sol, solver={**sol.solver, "solver": name},
+        bad = replace(sol, solver=sol.solver.replace(solver=name),
                       checks={"applied": {"equilibrium": 1.0}, "skipped": {}})
         with pytest.raises(cd.AccuracyError) as info:
             cd.solution.check_solution(bad)

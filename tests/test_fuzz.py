@@ -8,7 +8,7 @@ import resource
 
 import numpy as np
 import pytest
-from cvxdual.testing import check_result, perturb
+from fuzzing import check_result, perturb
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

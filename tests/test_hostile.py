@@ -182,12 +182,12 @@ def test_api_raises_cvxdual_errors(call, error):
     assert "\n" not in msg and len(msg) < 400  # one sentence, values shortened
 
 
-def test_recover_needs_a_solved_model():
+def test_solution_needs_a_solved_model():
     model = cd.build_model("patch", level=0)
     with pytest.raises(cd.ModelError, match="not been solved"):
-        cd.recover(model, "type1", 0, {})
-    info = model.solve("CLARABEL")
-    sol = cd.recover(model, "type1", 0, info)  # and once solved it works
+        model.solution()
+    model.solve("CLARABEL")
+    sol = model.solution()  # and once solved it works
     assert sol.residuals["equilibrium"] <= cd.solution.TOLERANCES["equilibrium"]
 
 
@@ -220,12 +220,12 @@ def test_study_cache_that_cannot_hold_entries(tmp_path, monkeypatch, capsys):
 
 def test_running_out_of_memory_is_a_cvxdual_error(tmp_path, monkeypatch, capsys):
     """A MemoryError the estimate did not foresee (e.g. under a ulimit) is reported, not a traceback."""
-    import cvxdual.pipeline as pipeline
+    import cvxdual.p0.run as run
 
     def exhausted(*args, **kwargs):
         raise MemoryError
 
-    monkeypatch.setattr(pipeline, "assemble", exhausted)
+    monkeypatch.setattr(run, "assemble", exhausted)
     with pytest.raises(cd.TooLargeError, match="ran out of memory"):
         cd.solve("patch", level=0)
     rc, err, created = run_cli(tmp_path, monkeypatch, capsys, RUN + ["--scene", "patch"])

@@ -1,4 +1,4 @@
-"""The peers study (cvxdual/study/peers.py) without dolfinx or network: the error metrics, the time
+"""The peers study (studies/peers.py) without dolfinx or network: the error metrics, the time
 to accuracy, the export (an independent solve reproduces cvxdual's pressures), the skip path and
 the study's verdict on a peer's results (a stand-in peer built from cvxdual's own pressures)."""
 
@@ -9,8 +9,9 @@ import sys
 import numpy as np
 import pytest
 
+import peers  # studies/peers.py, on the path by conftest.py
+
 import cvxdual
-from cvxdual.study import peers
 
 
 def _args(tmp_path, *argv):

@@ -213,7 +213,11 @@ def test_report_plots_have_units_and_no_overlapping_ticks():
 
 
 def test_speed_plot_draws_memory_only_where_measured(tmp_path):
-    from cvxdual.study.specs.speed import _paths, _plots
+    from run_study import SPECS  # studies/, on the path by conftest.py
+
+    from cvxdual.study.spec import load_module
+    speed = load_module(SPECS / "speed.py")
+    _paths, _plots = speed._paths, speed._plots
     from PIL import Image
     d = _paths(pd.read_csv(REPORTS / "speed.csv"))
     scan, pareto = d[d.part == "scan"], d[d.part == "pareto"]

@@ -57,7 +57,8 @@ def test_integer_g_is_a_float(tmp_path):
 
 
 def test_from_dict():
-    data = {**cd.scenefile.builtin_data("patch"), "contact": {"friction": {"kind": "tresca", "g": 0.0}}}
+    from cvxdual.scene.scenefile import builtin_data
+    data = {**builtin_data("patch"), "contact": {"friction": {"kind": "tresca", "g": 0.0}}}
     assert load_scene(data).friction == Friction(g=0.0)
     assert load_scene("patch", [{"contact": {"friction": {"g": 12.5}}}]).friction.g == 12.5
 

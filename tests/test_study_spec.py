@@ -1,5 +1,5 @@
-"""Study specs, the checked cache and the command line (no cluster: fast), and the built-in
-specs' quick variants on one shared local cluster."""
+"""Study specs, the checked cache and the command line (no cluster: fast), and the project's own
+specs (studies/specs/) in their quick variants on one shared local cluster."""
 
 from __future__ import annotations
 
@@ -9,8 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from run_study import SPECS  # studies/, on the path by conftest.py
+
 from cvxdual.cli import main
-from cvxdual.study import StudyError, builtin_specs, load_spec, run
+from cvxdual.study import StudyError, load_spec, run
 from cvxdual.study.cache import Cache
 
 
@@ -25,9 +27,8 @@ def test_spec_expands_grid(tmp_path):
     assert {c.solver for c in st.cases} == {"fast", "CLARABEL"}
     assert st.cases[0].overrides_text == "mesh.grading=1.0"
     assert len(load_spec(tmp_path / "g.toml", quick=True).cases) == 2 * 2 * 2 * 3
-    assert {"convergence", "speed", "stability"} <= set(builtin_specs())
-    for name in ("convergence", "stability"):
-        assert load_spec(name, quick=True).cases
+    for name in ("convergence.toml", "stability.py", "speed.py", "bounds.py"):
+        assert load_spec(SPECS / name, quick=True).cases
 
 
 @pytest.mark.parametrize("text, words", [
@@ -50,12 +51,21 @@ def test_bad_spec_one_line(tmp_path, capsys, text, words):
 
 
 def test_study_help(capsys):
-    for argv in (["study", "-h"], ["study", "run", "-h"], ["study", "convergence", "-h"]):
+    for argv in (["study", "-h"], ["study", "run", "-h"]):
         with pytest.raises(SystemExit) as e:
             main(argv)
         assert e.value.code == 0
     out = capsys.readouterr().out
-    assert "--scheduler ADDRESS" in out and "--memory-limit" in out and "convergence" in out
+    assert "--scheduler ADDRESS" in out and "--memory-limit" in out and "studies/specs/convergence.toml" in out
+
+
+def test_missing_spec_file_one_line(tmp_path, capsys):
+    for source, words in ((tmp_path / "nowhere.toml", "does not exist"), (tmp_path, "is not a file")):
+        with pytest.raises(StudyError, match=words):
+            load_spec(source)
+    assert main(["study", "run", "convergence", "--cache", "", "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'convergence' does not exist" in err[0] and "studies/specs/" in err[0]
 
 
 def test_cache_rejects_tampered_entries(tmp_path):
@@ -90,7 +100,7 @@ def test_cache_rejects_tampered_entries(tmp_path):
 
 
 def test_stability_quick(client, tmp_path):
-    df = run("stability", tmp_path, quick=True, client=client, cache=None, quiet=True)
+    df = run(SPECS / "stability.py", tmp_path, quick=True, client=client, cache=None, quiet=True)
     assert set(df.solver) == {"CLARABEL", "fast"} and set(df.triangulation) == {"type1", "type2"}
     solved = df[df.status == "optimal"]
     assert solved.paths_agree_l2_rel.max() < 1e-5 and solved.within_tolerances.all()
@@ -104,13 +114,11 @@ def test_stability_quick(client, tmp_path):
 
 
 def test_convergence_spec_small(client, tmp_path):
-    """The built-in convergence spec (its hooks and report) on a subset: hertz against the exact
-    field, the groove against a finer reference."""
+    """The convergence spec (its hooks and report) on a subset: hertz against the exact field, the
+    groove against a finer reference."""
     import tomllib
-
-    from cvxdual.study.spec import BUILTIN_SPECS
-    raw = tomllib.loads((BUILTIN_SPECS / "convergence.toml").read_text())
-    raw["hooks"] = str(BUILTIN_SPECS / raw["hooks"])
+    raw = tomllib.loads((SPECS / "convergence.toml").read_text())
+    raw["hooks"] = str(SPECS / raw["hooks"])
     raw["scenes"] = [{"source": "hertz", "reference": "exact", "levels": [0, 1, 2]},
                      {"source": "cylinder-in-groove", "reference": {"level": 3}, "levels": [0, 1]}]
     df = run(raw, tmp_path, client=client, cache=tmp_path / "cache", quiet=True)
@@ -132,9 +140,6 @@ def test_convergence_spec_small(client, tmp_path):
 
 def test_speed_limit_rows(client, tmp_path):
     """The speed study's pseudo-solver ``limit`` (one factorisation) next to a solve, in processes."""
-    import cvxdual.p0.fast
-    if not hasattr(cvxdual.p0.fast, "limit"):
-        pytest.skip("cvxdual.p0.fast.limit is not there yet")
     spec = {"name": "lim", "scenes": ["hertz"], "levels": [1], "overrides": {"mesh": {"columns": 4}},
             "cases": [{"solvers": ["limit"], "isolate": "process"}, {"solvers": ["fast"]}]}
     df = run(spec, None, client=client, cache=None, quiet=True).set_index("solver")
@@ -147,12 +152,12 @@ def test_speed_limit_rows(client, tmp_path):
 
 
 def test_bounds_spec_small(client, tmp_path):
-    """The built-in bounds spec on hertz level 1 at two Poisson ratios: eq beats p0, the bound
-    dominates the true error, and eq does not lock."""
-    from cvxdual.study.spec import BUILTIN_SPECS, load_module
-    spec = load_module(BUILTIN_SPECS / "bounds.py")
+    """The bounds spec on hertz level 1 at two Poisson ratios: eq beats p0, the bound dominates the
+    true error, and eq does not lock."""
+    from cvxdual.study.spec import load_module
+    spec = load_module(SPECS / "bounds.py")
     cases = [{**spec._block("hertz", sp, "fast", nu), "levels": [1]} for sp in ("p0", "eq") for nu in (0.3, 0.4999)]
-    raw = {**spec.SPEC, "cases": cases, "hooks": str(BUILTIN_SPECS / "bounds.py")}
+    raw = {**spec.SPEC, "cases": cases, "hooks": str(SPECS / "bounds.py")}
     df = run(raw, tmp_path, client=client, cache=None, quiet=True)
     assert (df.status == "optimal").all() and len(df) == 4
     eq = df[df.stress_space == "eq"].set_index(["nu", "level"])

@@ -166,7 +166,7 @@ def test_line_cells_are_the_contact_csv_rows(tmp_path, scene):
         assert np.allclose(area_and_lines(m, vtu_name)[1], csv[col], rtol=CSV_RTOL, atol=0), vtu_name
     assert np.array_equal(area_and_lines(m, "active")[1], csv["active"])
     # gap - relative_normal >= 0 (no penetration), to the promise every solution keeps: the
-    # penetration tolerance relative to the displacement scale delta (cvxdual.solution.penetration)
+    # penetration tolerance relative to the displacement scale delta (cvxdual.p0.checks.penetration)
     rel = area_and_lines(m, "relative_normal")[1]
     g = area_and_lines(m, "gap")[1]
     delta = max(np.abs(sol.displacement).max(), np.abs(g).max(), sol.system.scales.displacement)

@@ -23,7 +23,7 @@ from ..errors import SceneError
 from ..geometry.boundary import supported
 from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
-from ..p0.norms import VOIGT_WEIGHT
+from ..voigt import VOIGT_WEIGHT
 from .element import MASS0, bary_gradients, frame_rows, internal_rows, sub_vertices
 from .space import CONTACT, FIXED, N_GAUSS, EquilibriumSpace, outward_normals
 
@@ -81,7 +81,7 @@ def constraint_blocks(space: EquilibriumSpace) -> dict:
     return out
 
 
-def residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> dict:
+def admissibility_residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> dict:
     """Largest violation of each block of :func:`constraint_blocks` by vertex stresses
     ``sigma`` (any shape holding ``27 n_T`` values), relative to the stress scale."""
     blocks = constraint_blocks(space) if blocks is None else blocks
@@ -236,7 +236,7 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
     """
     blocks = constraint_blocks(space) if blocks is None else blocks
     sig = np.asarray(sigma, float).reshape(space.n_tri, 3, 3, 3)
-    res = residuals(space, sig, blocks)
+    res = admissibility_residuals(space, sig, blocks)
     v, fixinfo = admissible_displacement(space, displacement) if fix else (np.asarray(displacement, float), {})
     _, smin, exact_min = contact_slack(space, v)
     p = -contact_tractions(space, sig, blocks)
@@ -280,7 +280,7 @@ def data_oscillation(space: EquilibriumSpace) -> float:
     return float(np.sqrt(np.sum(h * te["osc2"]) / Emin))
 
 
-# -- comparison with an exact field, and output -----------------------------------------------
+# -- comparison with an exact field -----------------------------------------------
 
 def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray, exact, n: int = 6) -> dict:
     """Errors against an exact stress ``exact.stress(body, points)``: ``l2_rel`` of ``sigma``
@@ -315,12 +315,3 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
             "displacement_a": float(np.sqrt(e_u)), "combined": float(np.sqrt(e_s + e_u)),
             "reference_A": float(np.sqrt(sq(ref, A))),
             "l2_rel_displacement": float(np.sqrt(sq(ref - ce[:, None, :]) / ref0))}
-
-
-def vtu_cells(space: EquilibriumSpace, sigma: np.ndarray) -> dict:
-    """Discontinuous P1 output: ``points (3 n_sub, 2)`` (each sub-triangle its own vertices),
-    ``cells (n_sub, 3)``, ``point_stress (3 n_sub, 3)`` Voigt, ``cell_body`` and ``cell_triangle``."""
-    n_sub = 3 * space.n_tri
-    return {"points": space.sub_points().reshape(-1, 2), "cells": np.arange(3 * n_sub).reshape(n_sub, 3),
-            "point_stress": np.asarray(sigma, float).reshape(-1, 3), "cell_body": np.repeat(space.body, 3),
-            "cell_triangle": np.repeat(np.arange(space.n_tri), 3)}

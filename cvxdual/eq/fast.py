@@ -1,6 +1,7 @@
 """The fast path of the equilibrium (Johnson-Mercier) dual (docs/equilibrium.md, section 10):
-a primal-dual active set method on the KKT system of the QP of
-:class:`~cvxdual.eq.model.EquilibriumModel`, condensed by hybridisation to an SPD system.
+the active-set method of :mod:`cvxdual.fast.core` on the KKT system of the QP of
+:class:`~cvxdual.eq.model.EquilibriumModel`, condensed by hybridisation to an SPD system; this
+module is its linear algebra.
 
 Hybridisation. Every parameter ``y`` that two triangles share (an interior edge dof, or a
 contact normal traction in contact, shared by the two faces) gets a copy in each triangle,
@@ -9,7 +10,7 @@ local KKT system ``[[H_T, B_T^T], [B_T, 0]]`` (15 parameters, 6 divergence rows;
 parameters held at their value) is non-singular, so the local parameters and divergence
 multipliers are affine in ``mu``, and continuity of the copies leaves
 ``S mu = f`` with ``S = sum_T N_T^T (K_T^-1)_yy N_T`` symmetric positive semi-definite. Its
-kernel is the floating rigid motions (``rigid_modes(joint=True)``; hertz: 1): one ``mu`` per
+kernel is the floating rigid motions (``rigid_motions(joint=True)``; hertz: 1): one ``mu`` per
 motion is pinned to 0 (the motion's multiplier gauge) and its continuity equation dropped,
 which the balanced loads imply, so the result stays exact. ``S`` has ~6 unknowns per
 triangle (4 per interior edge), ~40% of ``[[M, D^T], [D, 0]]``, and is SPD (Cholesky).
@@ -30,12 +31,12 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..errors import SolverError
+from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active
 from ..linalg.factor import SPDFactor
-from ..p0.fast import transfer_active
+from ..solution import SolverStats
 from .element import MASS0, bary_gradients, divergence_rows, sub_vertices
-from .space import EquilibriumSpace, make_exact, rigid_modes
+from .space import EquilibriumSpace, make_exact, rigid_motions
 
-MAX_ITER = 50
 CHUNK = 16384  # triangles per batched local inversion: bounds the temporaries (21 x 21 each)
 SET_TOL = 1e-10  # relative size of p or nu below which the contact state is left as it is (rounding)
 RESIDUAL_TOL = 1e-8  # relative residual of the condensed solve above which it is not trusted
@@ -69,7 +70,7 @@ def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, firs
     floating motion ``r``: the kernel of ``S`` is ``mu_y = s_o * int phi_e (frame . r)`` (the
     work of the parameter on ``r``, signed by the outward normal of its first triangle); QR
     with column pivoting picks entries where these vectors are independent."""
-    r = rigid_modes(space.mesh, joint=True)
+    r = rigid_motions(space.mesh, joint=True)
     if r.shape[2] == 0:
         return np.empty(0, int)
     ed = space.edges
@@ -92,7 +93,7 @@ def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, firs
 def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
     """``(n_c, 2, m)``: jump ``[r_y]`` at each contact parameter of the rigid motions of each
     body alone; the parameters in contact must stop every motion that separates the bodies."""
-    r = rigid_modes(space.mesh, joint=False)
+    r = rigid_motions(space.mesh, joint=False)
     up, lo = space.mesh.pairs.T
     dk = r[lo, 1] - r[up, 1]  # (n_pairs, m)
     n_c = len(space.contact_y)
@@ -102,15 +103,20 @@ def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
 def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray) -> np.ndarray:
     """Contact parameters ``(n_c, 2)`` in contact for an active set ``active`` given at abscissae
     ``x`` (the P0 fast path's pairs, or the ``contact_x`` of a coarser equilibrium solve):
-    :func:`cvxdual.p0.fast.transfer_active` on the sorted points."""
+    :func:`cvxdual.fast.core.transfer_active` on the sorted points."""
     x, a = np.asarray(x, float).ravel(), np.asarray(active, bool).ravel()
     order = np.argsort(x, kind="stable")
     return transfer_active(x[order], a[order], space.contact_x)
 
 
 class HybridSolver:
-    """Primal-dual active set solver of the equilibrium dual of one :class:`EquilibriumSpace`,
-    in the nondimensional variables of :class:`~cvxdual.eq.model.EquilibriumModel`."""
+    """The linear algebra of the active-set method (:mod:`cvxdual.fast.core`) on the equilibrium
+    dual of one :class:`EquilibriumSpace`, in the nondimensional variables of
+    :class:`~cvxdual.eq.model.EquilibriumModel`."""
+
+    what = "eq fast path"
+    advice = ("use the CVXPY path (EquilibriumModel, or solver='CLARABEL')",
+              "use the CVXPY path (--solver CLARABEL)")
 
     def __init__(self, space: EquilibriumSpace):
         t0 = time.perf_counter()
@@ -146,10 +152,10 @@ class HybridSolver:
         self.tri_c = np.flatnonzero(on_face.any(1))
         rest = np.setdiff1d(np.arange(n_T), self.tri_c)
         self.jumps = pair_jumps(space).reshape(len(self.contact), -1)
-        self.backend = None  # of the last factorisation (cvxdual.linalg.factor)
-        self.stats = {"iterations": 0, "factorizations": 0, "factor_time": 0.0, "n_mu": 0, "nnz": 0}
+        self.stats = ActiveSetStats()
+        self.n_mu = self.nnz = 0  # size and nonzeros of the last condensed system
         self.S_rest, self.f_rest = self.condense(rest, np.zeros(n_y, bool), self.mu_int, self.n_int)
-        self.stats["setup_time"] = time.perf_counter() - t0
+        self.setup_time = time.perf_counter() - t0
 
     def _occurrences(self) -> None:
         """Each ``y`` appears in one or two local slots: ``first`` (flat slot index) and the
@@ -230,21 +236,6 @@ class HybridSolver:
             out.append((z, lam, grad))
         return tuple(np.concatenate(v) for v in zip(*out, strict=True)) if out else (np.zeros((0, 15)),) * 3
 
-    def cover(self, A: np.ndarray, closeness: np.ndarray) -> np.ndarray:
-        """``A`` plus, if needed, the closest parameters (smallest ``closeness``) that stop every
-        motion separating the bodies; otherwise a body would float and ``S`` be singular."""
-        dk = self.jumps
-        scale = max(float(np.abs(dk).max(initial=0.0)), 1e-300)
-        rank = lambda rows: np.linalg.matrix_rank(rows, tol=1e-9 * scale) if len(rows) else 0  # noqa: E731
-        need, r = rank(dk), rank(dk[A])
-        A = A.copy()
-        for k in np.argsort(closeness, kind="stable"):  # a few candidates: stops at the rank
-            if r == need:
-                break
-            if not A[k] and rank(dk[A | (np.arange(len(A)) == k)]) > r:
-                A[k], r = True, r + 1
-        return A
-
     def numbering(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """Separated ``y`` mask, multiplier index of each ``y`` and their count for the set ``A``."""
         sep = np.zeros(self.space.n_y, bool)
@@ -253,7 +244,7 @@ class HybridSolver:
         mu_of_y[self.contact[A]] = self.n_int + np.arange(int(A.sum()))
         return sep, mu_of_y, self.n_int + int(A.sum())
 
-    def solve_set(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def factor_set(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Multipliers ``mu`` of the equality-constrained QP of contact set ``A`` (one Cholesky)."""
         sep, mu_of_y, n_mu = self.numbering(A)
         S_c, f_c = self.condense(self.tri_c, sep, mu_of_y, n_mu)
@@ -263,17 +254,17 @@ class HybridSolver:
         f = np.concatenate([self.f_rest, np.zeros(n_mu - self.n_int)]) + f_c
         t0 = time.perf_counter()
         factor = SPDFactor(S)
-        self.backend = factor.method
+        self.stats.backend = factor.method
         mu = factor.solve(f)
         factor.close()
-        self.stats["factor_time"] += time.perf_counter() - t0
-        self.stats["factorizations"] += 1
-        self.stats["n_mu"], self.stats["nnz"] = n_mu, int(S.nnz)
+        self.stats.factor_time += time.perf_counter() - t0
+        self.stats.factorizations += 1
+        self.n_mu, self.nnz = n_mu, int(S.nnz)
         scale = max(float(np.abs(f).max(initial=0.0)), float((abs(S) @ np.abs(mu)).max(initial=0.0)), 1e-300)
         res = float(np.abs(S @ mu - f).max(initial=0.0)) / scale
         if not res <= RESIDUAL_TOL:
-            raise SolverError(f"eq fast path: the condensed system is singular or ill-conditioned (relative "
-                              f"residual {res:.1e}); use the CVXPY path (EquilibriumModel)")
+            why = f"the condensed system is singular or ill-conditioned (relative residual {res:.1e})"
+            raise SolverError(f"{self.what}: {why}; {self.advice[0]}", cli=f"{self.what}: {why}; {self.advice[1]}")
         return mu, sep, mu_of_y
 
     def contact_state(self, mu: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -287,32 +278,33 @@ class HybridSolver:
         (p, g1), (_, g2) = out
         return p, -(g1 + g2)
 
+    def solve_set(self, A: np.ndarray) -> dict:
+        """The multipliers ``mu`` of the set ``A`` (one Cholesky) and what the update reads: the
+        contact parameters ``p`` and openings ``nu`` (0 in contact, where the opening is not a
+        degree of freedom and is zero up to rounding)."""
+        mu, sep, mu_of_y = self.factor_set(A)
+        p, nu = self.contact_state(mu, sep, mu_of_y)
+        nu[A] = 0.0
+        return {"mu": mu, "sep": sep, "mu_of_y": mu_of_y, "p": p, "nu": nu}
+
+    def next_set(self, A: np.ndarray, state: dict) -> np.ndarray:
+        """Keep the compressive parameters (``p <= 0``), add the penetrating ones (``nu < 0``);
+        rounding-level tension or penetration leaves a parameter as it is: at the edge of a
+        smooth contact both ``p`` and ``nu`` tend to 0, and equivalent sets would otherwise
+        alternate. Closest first (smallest opening) where the set must be completed."""
+        p, nu = state["p"], state["nu"]
+        tol_p = SET_TOL * max(float(np.abs(p).max(initial=0.0)), 1e-300)
+        tol_nu = SET_TOL * max(float(np.abs(nu).max(initial=0.0)), float(np.abs(self.cy).max(initial=0.0)), 1e-300)
+        return cover(np.where(A, p <= tol_p, nu < -tol_nu), np.where(A, -1.0, nu), self.jumps)
+
     def run(self, active: np.ndarray | None = None) -> dict:
         """Iterate the active set from ``active`` (contact parameters ``(n_c, 2)``; all in
-        contact if ``None``) to its fixed point; return the set, ``y`` (over ``s``), ``p``, ``nu``."""
+        contact if ``None``) to its fixed point; return the set, ``mu``, ``p`` and ``nu``."""
         n_p = len(self.contact)
         A = np.ones(n_p, bool) if active is None else np.asarray(active, bool).reshape(n_p)
-        A = self.cover(A, -self.cy[self.contact])  # closest first: the smallest gap weight
-        seen = {A.tobytes()}
-        for it in range(1, MAX_ITER + 1):
-            mu, sep, mu_of_y = self.solve_set(A)
-            p, nu = self.contact_state(mu, sep, mu_of_y)
-            nu[A] = 0.0  # in contact: zero up to rounding, the opening is not a degree of freedom
-            tol_p = SET_TOL * max(float(np.abs(p).max(initial=0.0)), 1e-300)
-            tol_nu = SET_TOL * max(float(np.abs(nu).max(initial=0.0)), float(np.abs(self.cy).max(initial=0.0)), 1e-300)
-            # rounding-level tension or penetration leaves a parameter as it is: at the edge of a
-            # smooth contact both p and nu tend to 0, and equivalent sets would otherwise alternate
-            new = self.cover(np.where(A, p <= tol_p, nu < -tol_nu), np.where(A, -1.0, nu))
-            self.stats["iterations"] = it
-            if np.array_equal(new, A):
-                return {"active": A, "mu": mu, "sep": sep, "mu_of_y": mu_of_y, "p": p, "nu": nu}
-            if new.tobytes() in seen:
-                raise SolverError(f"eq fast path: the contact set cycles after {it} iterations; "
-                                  "use the CVXPY path (EquilibriumModel)")
-            seen.add(new.tobytes())
-            A = new
-        raise SolverError(f"eq fast path: no convergence in {MAX_ITER} active-set iterations; "
-                          "use the CVXPY path (EquilibriumModel)")
+        A = cover(A, -self.cy[self.contact], self.jumps)  # closest first: the smallest gap weight
+        A, state = iterate(self, A)
+        return {"active": A, **state}
 
     def finish(self, state: dict) -> tuple[np.ndarray, np.ndarray]:
         """All parameters ``y`` (over ``s``, from each one's first copy) and the divergence
@@ -327,33 +319,28 @@ class HybridSolver:
         return 0.5 * float(quad) + float(self.cy @ y)
 
 
-def contact_set(space: EquilibriumSpace, active: np.ndarray | None = None) -> np.ndarray:
-    """The converged contact set ``(n_c, 2)`` of ``space`` (no post-step): for warm starts."""
-    hs = HybridSolver(space)
-    return hs.run(active)["active"].reshape(-1, 2)
-
-
 def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
-    """Initial contact set from level ``L - 2`` of the same scene (itself started the same way,
-    every parameter in contact below level 2), interpolated to ``space.contact_x``. From all
-    in contact the set shrinks by a few parameters per iteration (~10 at any level); the
-    coarse set, at 1/16 of the cost, leaves 1-2 iterations."""
-    level = space.mesh.level
-    if level < 2:
-        return None
-    coarse = EquilibriumSpace.from_scene(space.scene, level - 2)
-    return active_from_pairs(space, coarse.contact_x, contact_set(coarse, coarse_active(coarse)))
+    """Initial contact set ``(n_c, 2)`` from level ``L - 2`` of the same scene
+    (:func:`cvxdual.fast.core.coarse_start`: every coarser level warm-started the same way, all
+    in contact below level 2), transferred to ``space.contact_x``; ``None`` below level 2."""
+    def solve_at(level: int, coarser):
+        sp = EquilibriumSpace.from_scene(space.scene, level)
+        start = None if coarser is None else active_from_pairs(sp, *coarser)
+        return sp.contact_x, HybridSolver(sp).run(start)["active"].reshape(-1, 2)
+
+    coarse = coarse_start(space.mesh.level, solve_at)
+    return None if coarse is None else active_from_pairs(space, *coarse)
 
 
-def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> tuple[np.ndarray, SolverStats]:
     """Exactly admissible parameters ``y`` (physical, after :func:`make_exact`) and statistics.
 
     ``active``: initial contact set, ``(n_c, 2)`` booleans on the contact parameters (see
     :func:`active_from_pairs` to take it from the P0 fast path or a coarser level); ``None``
-    takes it from :func:`coarse_active`. ``info`` has the keys of
-    :meth:`EquilibriumModel.solve` plus ``active``, ``objective`` (the model's objective at
-    the returned ``y``), ``multipliers`` (divergence ``(n_T, 6)``, openings ``nu (n_c, 2)``,
-    both nondimensional) and the times of the setup and the factorisations."""
+    takes it from :func:`coarse_active`. The statistics hold the final ``active`` set, the
+    ``objective`` of :class:`~cvxdual.eq.model.EquilibriumModel` at the returned ``y``, the
+    ``multipliers`` (divergence ``(n_T, 6)``, openings ``nu (n_c, 2)``, both nondimensional), the
+    pinned multipliers and the times of the set-up, the factorisations and the exactness step."""
     t0 = time.perf_counter()
     warm = active is None
     if warm:
@@ -367,11 +354,11 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
     y_exact, post = make_exact(space, y * s)
     t2 = time.perf_counter()
     n_c = len(space.contact_y)
-    info = {"solver": "fast", "status": "optimal", "backend": hs.backend, **hs.stats,
-            "solve_time": t1 - t0, "post_time": t2 - t1, "n_variables": space.n_y,
-            "n_equalities": space.div.shape[0], "n_inequalities": 2 * n_c,
-            "active": state["active"].reshape(n_c, 2), "objective": hs.objective(y_exact / s),
-            "multipliers": {"divergence": lam, "opening": state["nu"].reshape(n_c, 2)},
-            "pinned": hs.pins, "warm_start": "coarse level" if warm else "given", "warm_start_time": t_warm,
-            **post}
-    return y_exact, info
+    st = hs.stats
+    return y_exact, SolverStats(
+        solver="fast", status="optimal", iterations=st.iterations, solve_time=t1 - t0, backend=st.backend,
+        factorizations=st.factorizations, factor_time=st.factor_time, setup_time=hs.setup_time,
+        warm_start="coarse level" if warm else "given", warm_start_time=t_warm, active=state["active"].reshape(n_c, 2),
+        post_time=t2 - t1, n_variables=space.n_y, n_equalities=space.div.shape[0], n_inequalities=2 * n_c,
+        objective=hs.objective(y_exact / s), multipliers={"divergence": lam, "opening": state["nu"].reshape(n_c, 2)},
+        pinned=hs.pins, n_mu=hs.n_mu, nnz=hs.nnz, **post)

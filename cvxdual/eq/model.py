@@ -21,8 +21,9 @@ import numpy as np
 
 from ..errors import AccuracyError, ModelError
 from ..model.base import USER_TOLERANCE, ConvexModel
-from ..solution import EQ_TOLERANCES, Solution, edge_contact, failed_checks
+from ..solution import EQ_TOLERANCES, Solution, SolverStats, failed_checks
 from ..voigt import out_of_plane_factor
+from .contact import edge_contact
 from .space import EquilibriumSpace, make_exact
 
 
@@ -103,10 +104,11 @@ class EquilibriumModel(ConvexModel):
 
     # -- solving -------------------------------------------------------------------------
     def solve(self, solver: str = "CLARABEL", time_limit: float | None = None, verbose: bool = False,
-              **options) -> dict:
+              **options) -> SolverStats:
         """Solve (see :meth:`ConvexModel.solve`), then make the field exactly admissible:
         divided by the load factor (the exactness step is written for the unit load), made
-        exact, multiplied back. Returns an info dict (status, times, sizes, the step's changes)."""
+        exact, multiplied back. Returns the solver's statistics with the sizes and the exactness
+        step's changes."""
         stats = super().solve(solver, time_limit, verbose, **options)
         try:
             lf = float(self.load_factor.value)
@@ -118,11 +120,9 @@ class EquilibriumModel(ConvexModel):
         except Exception:
             self._solved = None  # no exact field: nothing to read
             raise
-        self.info = {"solver": solver, "status": stats["status"], "iterations": stats["iterations"],
-                     "wall": stats["wall"], "solve_time": stats["wall"], "solver_time": stats["solve_time"],
-                     "compile_time": stats["compile_time"], "post_time": time.perf_counter() - t1,
-                     "n_variables": self.space.n_y, "n_equalities": self._constraints["equilibrium"].size,
-                     "n_inequalities": self._constraints["contact"].size, **post}
+        self.info = stats.replace(post_time=time.perf_counter() - t1, n_variables=self.space.n_y,
+                                  n_equalities=self._constraints["equilibrium"].size,
+                                  n_inequalities=self._constraints["contact"].size, **post)
         return self.info
 
     def stresses(self) -> np.ndarray:
@@ -137,14 +137,14 @@ class EquilibriumModel(ConvexModel):
         gives them for the scene's own problem) and are listed in ``checks["skipped"]``."""
         from ..geometry.triangulation import discretize
         from ..p0.assembly import assemble
-        from .bounds import constraint_blocks, residuals
+        from .bounds import admissibility_residuals, constraint_blocks
         self._require_solved()
         t0 = time.perf_counter()
         space, s = self.space, self.space.scales.stress
         lf = float(self.load_factor.value)
         sigma = self.stresses()
         blocks = constraint_blocks(space)
-        res = residuals(space, sigma / lf, blocks)  # the blocks hold the unit load's data
+        res = admissibility_residuals(space, sigma / lf, blocks)  # the blocks hold the unit load's data
         applied = {"admissibility": max(res.values())}
         if self._user:
             solved = self.y.value
@@ -161,7 +161,7 @@ class EquilibriumModel(ConvexModel):
         contact = edge_contact(system, -lf * self.y_exact[space.contact_y], None, lf)
         sol = Solution(scene=space.scene, triangulation="type1", stress_space="eq", level=int(space.mesh.level),
                        system=system, stress=sigma, displacement=np.zeros((space.mesh.n_nodes, 2)),
-                       solver=dict(self.info),
+                       solver=self.info,
                        timings=self._timings(time.perf_counter() - t0),
                        objective=float("nan"), duality_gap=float("nan"), residuals={**applied, **res},
                        contact=contact, exact=None, error=None, space=space,

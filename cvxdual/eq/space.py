@@ -332,7 +332,7 @@ def _null(rows: np.ndarray, n: int) -> np.ndarray:
     return vt[rank:].T
 
 
-def rigid_modes(mesh: Mesh, joint: bool) -> np.ndarray:
+def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
     """Rigid motions allowed by the supports, ``(n_nodes, 2, m)``. ``joint``: of both bodies
     together keeping ``[r_y] = 0`` on the contact pairs (the floating modes, on which the loads
     must balance); otherwise of each body alone (with its contact tractions held fixed)."""
@@ -383,7 +383,7 @@ def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.nd
 def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
     """Check the data on the floating modes; return the fixed parameters with a rounding-level
     imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
-    r = rigid_modes(space.mesh, joint=True)
+    r = rigid_motions(space.mesh, joint=True)
     if r.shape[2] == 0:
         return space.z_fix, 0.0
     W, bf, bf_abs = work_rows(space, r)
@@ -426,7 +426,7 @@ def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray,
     ci = space.contact_y.ravel()
     p = np.minimum(y[ci], 0.0)
     y[ci] = p
-    r = rigid_modes(space.mesh, joint=False)
+    r = rigid_motions(space.mesh, joint=False)
     if r.shape[2] == 0:
         return y, 0.0
     W, bf, _ = work_rows(space, r)

@@ -99,6 +99,15 @@ class Pieces:
     def _bound(self, x, idx, which: str):
         return slab_bound(self.slabs, self.faces, x, idx, which)
 
+    def polygons(self, n: int = OUTLINE_POINTS) -> tuple[list[np.ndarray], np.ndarray]:
+        """Polygons of every piece, for drawing: the straight triangles, then the curved pieces
+        along the face (``n`` vertices per arc, :func:`piece_outlines`), and the piece of each."""
+        polys, ids = list(self.tri_vertices), [self.tri_piece]
+        for pid, poly in piece_outlines(self, n):
+            polys += list(poly)
+            ids.append(pid)
+        return polys, np.concatenate(ids)
+
     # -- quadrature --------------------------------------------------------------------
     def quadrature(self, n: int = 4, only: np.ndarray | None = None):
         """Points ``(m, 2)``, weights ``(m,)`` and piece index ``(m,)`` of a rule with ``n``

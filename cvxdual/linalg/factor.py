@@ -181,3 +181,24 @@ def _qdldl(L, owner: SPDFactor):
 
 
 _FACTOR = {"pardiso": _pardiso, "superlu": _superlu, "cholmod": _cholmod, "qdldl": _qdldl}
+
+
+def start_up(method: str | None = None) -> None:
+    """Pay one-time library start-up (BLAS thread discovery, the first factorisation by ``method``,
+    default the large systems' backend): for steady-state timings (the speed "limit",
+    :func:`cvxdual.p0.fast.limit`, pays it for every backend it times)."""
+    with one_blas_thread():
+        SPDFactor(sp.identity(8, format="csr"), method or backend()).solve(np.ones(8))
+
+
+@functools.cache
+def _openblas():
+    from threadpoolctl import ThreadpoolController
+    return ThreadpoolController().select(internal_api="openblas")
+
+
+def one_blas_thread():
+    """A context with OpenBLAS on one thread: the fast paths' dense work is small (Schur
+    complements of a few dozen columns, 21 x 21 local systems), and threads spinning against
+    MKL's (and other processes') made it 10-100 times slower at random on a shared machine."""
+    return _openblas().limit(limits=1)

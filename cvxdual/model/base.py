@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
-from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
-from cvxpy.reductions.solvers.defines import CONIC_SOLVERS
 
 from ..errors import ModelError
+from ..solution import SolverStats
+from . import cvxpy_internals as internals
 from .solvers import DEFAULT_SOLVER, TIME_LIMIT_OPTION, resolve_solver, solve_problem
 
 # a user constraint may be violated by this much relative to the size of its terms: the
@@ -78,7 +78,7 @@ class ConvexModel:
         self._solved = None  # (version, parameter values, solver, options) of the last solve
         self._problem = None
         self._rhs: _RhsCache | None = None  # re-solves that change load_factor only
-        self.info: dict = {}
+        self.info: SolverStats | None = None  # of the last solve
 
     def _changed(self) -> None:
         self._version += 1
@@ -236,7 +236,7 @@ class ConvexModel:
         return self._version, values
 
     def solve(self, solver: str = DEFAULT_SOLVER, time_limit: float | None = None, verbose: bool = False,
-              **options) -> dict:
+              **options) -> SolverStats:
         """Solve; returns the solver's statistics. ``time_limit`` in seconds (Clarabel, SCS,
         OSQP), ``verbose`` prints the solver's log, ``options`` go to the solver.
         Raises :class:`~cvxdual.errors.SolverError` naming the model's changes when they make
@@ -306,7 +306,7 @@ class ConvexModel:
         the solver is given what the compile left of it."""
         problem = self.problem
         lf = self.load_factor
-        cacheable = (not self.limit_analysis and solver in CONIC_SOLVERS and not set(options) & CVXPY_OPTIONS
+        cacheable = (not self.limit_analysis and solver in internals.conic_solvers() and not set(options) & CVXPY_OPTIONS
                      and problem.is_dpp())
 
         def run(opts: dict) -> float:
@@ -318,20 +318,20 @@ class ConvexModel:
             t0 = time.perf_counter()
             cache = self._rhs if self._rhs is not None and self._rhs.key == key else None
             if cache is None:
-                data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
+                data, chain, inverse = internals.problem_data(problem, solver, opts)
                 cache = self._rhs = _RhsCache(key, data, chain, inverse, float(lf.value))
             elif cache.affine is None:
                 cache.affine = self._affine_rhs(problem, solver, opts, cache)
             if cache.affine is False:  # load_factor is not in b alone: CVXPY from now on
                 problem.solve(solver=solver, verbose=bool(verbose), **opts)
                 return problem.compilation_time
-            data = cache.data if cache.affine is None else {**cache.data, "b": cache.b0 + float(lf.value) * cache.b1}
+            data = (cache.data if cache.affine is None else
+                    {**cache.data, internals.rhs_key(): cache.b0 + float(lf.value) * cache.b1})
             compile_time = time.perf_counter() - t0
             if time_limit is not None:
                 name = TIME_LIMIT_OPTION[solver]
                 opts = {**opts, name: max(opts[name] - compile_time, 1e-3)}
-            problem.unpack_results(cache.chain.solve_via_data(problem, data, False, bool(verbose), opts),
-                                   cache.chain, cache.inverse)
+            internals.solve_data(problem, cache.chain, data, cache.inverse, bool(verbose), opts)
             return compile_time
 
         return run
@@ -340,20 +340,21 @@ class ConvexModel:
         """Whether the kept data (at load factor ``cache.value``) and the data at 0 differ in
         ``b`` alone; if so ``cache.b0``, ``cache.b1 = (b(value) - b0) / value`` are set. Not where
         the solver takes QP data, or a user's constraint multiplies a variable by ``load_factor``."""
-        if not isinstance(cache.chain.solver, ConicSolver):  # a solver on both lists may get QP data instead
+        if not internals.is_conic(cache.chain):
             return False
         v = float(self.load_factor.value)
         try:
             self.load_factor.value = 0.0
-            zero = problem.get_problem_data(solver, solver_opts=opts)[0]
+            zero = internals.problem_data(problem, solver, opts)[0]
         finally:
             self.load_factor.value = v
+        b = internals.rhs_key()
         for k, a in cache.data.items():
             z = zero[k]
             changed = (a != z).nnz if sp.issparse(a) else isinstance(a, np.ndarray) and not np.array_equal(a, z)
-            if k != "b" and changed:
+            if k != b and changed:
                 return False
-        cache.b0, cache.b1 = zero["b"], (cache.data["b"] - zero["b"]) / cache.value
+        cache.b0, cache.b1 = zero[b], (cache.data[b] - zero[b]) / cache.value
         return True
 
     def _require_solved(self) -> None:
@@ -377,8 +378,8 @@ class ConvexModel:
     def _timings(self, recover: float) -> dict:
         """``Solution.timings`` of the last solve: the model's own phases (meshing and assembly
         happened before the model was built, and are not timed here)."""
-        build = float(self.info.get("compile_time") or 0.0)
-        solve = float(self.info.get("wall") or 0.0) - build
+        build = self.info.compile_time or 0.0
+        solve = (self.info.solve_time or 0.0) - build
         return {"mesh": 0.0, "assemble": 0.0, "build": build, "solve": solve, "recover": recover, "error": 0.0,
                 "total": build + solve + recover}
 

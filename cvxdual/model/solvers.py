@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 
 from ..errors import SolverError, TimeLimitError, UnknownSolverError
+from ..solution import SolverStats
 from ..validate import one_line
 
 DEFAULT_SOLVER = "CLARABEL"  # the reference, and where every other path hands over
@@ -73,8 +74,8 @@ _ADVICE = {
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
                   verbose: bool = False, run=None, accept: tuple = ("optimal",), defaults: dict | None = None,
-                  **options) -> dict:
-    """Solve the ``cvxpy.Problem`` ``problem``; return timing and statistics, or raise :class:`SolverError`.
+                  **options) -> SolverStats:
+    """Solve the ``cvxpy.Problem`` ``problem``; return its statistics, or raise :class:`SolverError`.
 
     ``advice`` replaces the advice given for a status (e.g. a model that knows the user's
     changes names them); ``time_limit`` (seconds) is passed as the solver's own option
@@ -128,12 +129,6 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
         text = (advice or {}).get(status) or _ADVICE.get(status, "try another solver")
         raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}")
     stats = problem.solver_stats
-    return {
-        "status": status,
-        "solver": solver,
-        "iterations": getattr(stats, "num_iters", None),
-        "solve_time": getattr(stats, "solve_time", None),
-        "setup_time": getattr(stats, "setup_time", None),
-        "compile_time": compile_time,
-        "wall": wall,
-    }
+    return SolverStats(solver=solver, status=status, iterations=getattr(stats, "num_iters", None), solve_time=wall,
+                       solver_time=getattr(stats, "solve_time", None), setup_time=getattr(stats, "setup_time", None),
+                       compile_time=compile_time)

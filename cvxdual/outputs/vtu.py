@@ -150,11 +150,19 @@ def _lower_face_stress(P: np.ndarray, s: np.ndarray, lower: int, cell_body: np.n
     return (1 - t) * s[a[k]] + t * s[b[k]]
 
 
+def _eq_cells(space, sigma: np.ndarray) -> dict:
+    """Discontinuous P1 output: ``points (3 n_sub, 2)`` (each sub-triangle its own vertices),
+    ``cells (n_sub, 3)``, ``point_stress (3 n_sub, 3)`` Voigt, ``cell_body`` and ``cell_triangle``."""
+    n_sub = 3 * space.n_tri
+    return {"points": space.sub_points().reshape(-1, 2), "cells": np.arange(3 * n_sub).reshape(n_sub, 3),
+            "point_stress": np.asarray(sigma, float).reshape(-1, 3), "cell_body": np.repeat(space.body, 3),
+            "cell_triangle": np.repeat(np.arange(space.n_tri), 3)}
+
+
 def _write_eq_vtu(sol, path) -> None:
     """Equilibrium stresses: every sub-triangle a cell with its own vertices (discontinuous),
     point data the linear stresses, so equilibrium can be checked from the file alone."""
-    from ..eq.bounds import vtu_cells
-    c = vtu_cells(sol.space, sol.stress)
+    c = _eq_cells(sol.space, sol.stress)
     tri = sol.mesh.triangles()
     v = sol.displacement
     # the P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid), in cell order

@@ -31,19 +31,10 @@ import scipy.sparse as sp
 
 from ..errors import AccuracyError, ModelError
 from ..model.base import USER_TOLERANCE, ConvexModel
-from ..solution import (
-    TOLERANCES,
-    Solution,
-    admissibility,
-    complementarity,
-    duality_gap,
-    evaluate,
-    failed_checks,
-    load_scale,
-    penetration,
-)
+from ..solution import TOLERANCES, Solution, failed_checks, load_scale
 from ..voigt import out_of_plane_factor
 from .assembly import System
+from .checks import admissibility, complementarity, duality_gap, evaluate, penetration
 
 
 def _selector(rows: np.ndarray, n: int, sign: float = 1.0) -> sp.csr_matrix:
@@ -302,7 +293,7 @@ class DualModel(ConvexModel):
         t, u = self.stresses(), self.displacements()
         g = self._numeric(self._g)
         sigma_a = self._numeric(self._sigma_a)
-        fields = evaluate(system, t, u, dict(self.info), friction=g, adhesion=sigma_a,
+        fields = evaluate(system, t, u, self.info, friction=g, adhesion=sigma_a,
                           displacements=self._elastic())
         fields.pop("timings")
         applied, skipped = self._checks(system, t, u, fields, g, sigma_a, lf)
@@ -322,7 +313,7 @@ class DualModel(ConvexModel):
                           "the solution's: pass tighter tolerances (tol_gap_rel=1e-14, tol_feas=1e-16, "
                           "tol_ktratio=1e-12 worked at 1e-4 on hertz) or build the model from the scene with its "
                           "loads scaled")
-                raise AccuracyError(f"solver {self.info.get('solver')} returned 'optimal' but the solution fails "
+                raise AccuracyError(f"solver {self.info.solver} returned 'optimal' but the solution fails "
                                     f"the checks that apply to this model ({txt}); {advice}, or "
                                     "model.solution(check=False) to inspect it")
         return sol

@@ -1,6 +1,6 @@
-"""The fast path: the same discrete problem in its condensed displacement form
-(docs/theory.md#the-displacement-form-and-the-fast-path), solved by a primal-dual active set
-method (semismooth Newton, Hintermueller, Ito and Kunisch 2002) with sparse SPD factorisations.
+"""The fast path of the P0 dual: the same discrete problem in its condensed displacement form
+(docs/theory.md#the-displacement-form-and-the-fast-path), solved by the active-set method of
+:mod:`cvxdual.fast.core` with sparse SPD factorisations; this module is its linear algebra.
 
 ``min 1/2 r.K r - g.r`` subject to ``r''_y(B_k) - r'_y(A_k) <= eps_k``, with
 ``K = Z^T E A_h^-1 E^T Z``: for type 1 this is exactly the Lagrangian dual of the stress QP, so
@@ -8,8 +8,8 @@ method (semismooth Newton, Hintermueller, Ito and Kunisch 2002) with sparse SPD 
 as the dual's ``E``). Given an active set ``A`` the constraints of ``A`` are equalities: the
 lower node's dof is eliminated, ``r_b = r_a + eps``, and the reduced stiffness ``K_A`` is SPD
 (floating modes are fixed at the anchors). The new active set keeps the pairs with
-compressive force and adds the penetrating ones; the method stops when the set repeats,
-which makes the result exact up to the factorisation.
+compressive force and adds the penetrating ones; the method stops when the set reproduces
+itself, which makes the result exact up to the factorisation.
 
 One factorisation serves several iterations: pairs that change relative to the factorised
 set enter through a small Schur complement (a bordered system solved with the factor),
@@ -19,21 +19,18 @@ coarser level) make the changes few.
 
 from __future__ import annotations
 
-import functools
-import logging
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SolverError
-from ..linalg.factor import SPDFactor, backend, backends
+from ..fast.core import ActiveSetStats, cover, iterate
+from ..linalg.factor import SPDFactor, backends, one_blas_thread, start_up
 from ..linalg.sparse import assemble_lower
+from ..solution import SolverStats
 from .assembly import System
 
-log = logging.getLogger(__name__)
-
-MAX_ITER = 60
 MAX_UPDATE = 48  # changed pairs handled by the Schur complement before refactorising
 REFINE_STEPS = 3  # iterative refinement of each solve, ...
 # ... while the relative residual exceeds this: well-conditioned solves end at 1e-12 to 2e-11
@@ -45,7 +42,7 @@ REFINE_TOL = 1e-10
 class _Base:
     """The factorised reduced stiffness of one active set."""
 
-    def __init__(self, ps: "ActiveSet", active: np.ndarray, factorize: bool = True):
+    def __init__(self, ps: DisplacementSolver, active: np.ndarray, factorize: bool = True):
         s = ps.system
         n_r = s.n_r
         self.active = active.copy()
@@ -79,8 +76,12 @@ class _Base:
         return np.where(self.zidx >= 0, z[np.maximum(self.zidx, 0)], 0.0) + self.r_e
 
 
-class ActiveSet:
-    """Primal-dual active set solver of one assembled :class:`~cvxdual.p0.assembly.System`."""
+class DisplacementSolver:
+    """The linear algebra of the active-set method (:mod:`cvxdual.fast.core`) on the displacement
+    form of one assembled :class:`~cvxdual.p0.assembly.System`."""
+
+    what = "fast path"
+    advice = ("use the CVXPY path (solver='CLARABEL')", "use the CVXPY path (--solver CLARABEL)")
 
     def __init__(self, system: System):
         self.system = s = system
@@ -89,8 +90,10 @@ class ActiveSet:
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)
         self.anchored[s.anchors] = True
-        self.backend = None  # the factorisation backend of the last base (cvxdual.linalg.factor)
-        self.stats = {"iterations": 0, "factorizations": 0, "schur_updates": 0, "max_update": 0, "refinements": 0}
+        self.jumps = s.separating[s.jb] - s.separating[s.ja]  # each pair's relative motion, per separating mode
+        self.fscale = max(float(np.abs(self.g).max()), 1e-300)
+        self.base: _Base | None = None
+        self.stats = ActiveSetStats()
 
     def apply_k(self, r: np.ndarray) -> np.ndarray:
         s = self.system
@@ -127,7 +130,9 @@ class ActiveSet:
         need_y0 = rhs is not None or base.y0 is None
         first = [base.rhs if rhs is None else rhs] if need_y0 else []
         if first or new:
+            t0 = time.perf_counter()
             sol = base.factor.solve(np.column_stack(first + [M[:, i] for i in new])).reshape(base.n_z, -1)
+            self.stats.factor_time += time.perf_counter() - t0
             for i, x in zip(new, sol[:, len(first):].T, strict=True):
                 base.solved[keys[i]] = x
             if need_y0:
@@ -150,8 +155,8 @@ class ActiveSet:
             raise SolverError("fast path: singular update (the active set leaves a body free to move)") from None
         r = expand(y0 - X @ w)
         r[jb_rel] += w[:m1]
-        self.stats["schur_updates"] += 1
-        self.stats["max_update"] = max(self.stats["max_update"], len(keys))
+        self.stats.schur_updates += 1
+        self.stats.max_update = max(self.stats.max_update, len(keys))
         return r
 
     def _border(self, base: _Base, rel: np.ndarray, add: np.ndarray) -> np.ndarray:
@@ -193,77 +198,49 @@ class ActiveSet:
             if not size_new < 0.5 * size:  # stalls: the factor has nothing more to give
                 break
             r, res, size, gap = r_new, res_new, size_new, gap_new
-            self.stats["refinements"] += 1
+            self.stats.refinements += 1
         return r, res
 
     def initial(self) -> np.ndarray:
         """Cold start: the pairs at the smallest gap (the first to touch)."""
         s = self.system
         tol = 1e-9 * max(float(np.abs(s.eps).max()), s.scales.displacement)
-        return self.cover(s.eps <= s.eps.min() + tol, s.eps)
+        return cover(s.eps <= s.eps.min() + tol, s.eps, self.jumps)
 
-    def cover(self, A: np.ndarray, closeness: np.ndarray) -> np.ndarray:
-        """``A`` plus, if needed, the closest pairs (smallest ``closeness``) that stop every
-        separating rigid motion: a body held only by contact needs as many independent
-        active pairs as it has such motions, or ``K_A`` is singular."""
+    def solve_set(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(r, res)``: free displacements of the set ``A`` and the residual ``g - K r`` (its pair
+        rows are the contact forces). Pairs that changed since the last factorisation enter
+        through the Schur complement, until there are too many; then ``K_A`` is factorised anew."""
+        base = self.base
+        rel = np.flatnonzero(base.active & ~A) if base is not None else None
+        add = np.flatnonzero(A & ~base.active) if base is not None else None
+        if base is None or len(rel) + len(add) > MAX_UPDATE or len(base.solved) > MAX_UPDATE:
+            t0 = time.perf_counter()
+            self.base = base = _Base(self, A)
+            self.stats.factor_time += time.perf_counter() - t0
+            self.stats.backend = base.factor.method
+            self.stats.factorizations += 1
+            rel = add = np.empty(0, int)
+        return self._refine(base, rel, add, A, self._solve(base, rel, add), self.fscale)
+
+    def next_set(self, A: np.ndarray, state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Keep the pairs with compressive force, add the penetrating ones; rounding-level forces
+        and penetrations do not change the set (equivalent sets at a degenerate contact edge
+        would otherwise alternate)."""
         s = self.system
-        m = s.separating.shape[1]
-        if not m:
-            return A
-        dk = s.separating[s.jb] - s.separating[s.ja]  # relative motion of each pair, per mode
-        scale = max(float(np.abs(dk).max()), 1e-300)
-        rank = lambda rows: np.linalg.matrix_rank(rows, tol=1e-9 * scale) if len(rows) else 0  # noqa: E731
-        A = A.copy()
-        r = rank(dk[A])
-        for k in np.argsort(closeness, kind="stable"):
-            if r == m:
-                break
-            if not A[k] and rank(dk[A | (np.arange(len(A)) == k)]) > r:
-                A[k] = True
-                r += 1
-        return A
+        r, res = state
+        force = np.where(A, res[s.jb], 0.0)
+        opening = s.eps - (r[s.jb] - r[s.ja])
+        keep = np.where(A, force > -1e-12 * self.fscale, opening < -1e-12 * s.scales.displacement)
+        return cover(keep, opening, self.jumps)
 
-    def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return ``(r, force, active)``: free displacements, nodal contact forces, active set."""
+    def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(r, active)``: free displacements and the converged active set, from ``active`` (or
+        the first pairs to touch), completed by :func:`~cvxdual.fast.core.cover`."""
         s = self.system
-        A = self.initial() if active is None else self.cover(np.asarray(active, bool), s.eps)
-        base = None
-        fscale = max(float(np.abs(self.g).max()), 1e-300)
-        dscale = s.scales.displacement
-        seen = set()
-        for it in range(1, MAX_ITER + 1):
-            rel = np.flatnonzero(base.active & ~A) if base is not None else None
-            add = np.flatnonzero(A & ~base.active) if base is not None else None
-            if base is None or len(rel) + len(add) > MAX_UPDATE or len(base.solved) > MAX_UPDATE:
-                base = _Base(self, A)
-                self.backend = base.factor.method
-                self.stats["factorizations"] += 1
-                rel = add = np.empty(0, int)
-            r, res = self._refine(base, rel, add, A, self._solve(base, rel, add), fscale)
-            force = res[s.jb]
-            force[~A] = 0.0
-            opening = s.eps - (r[s.jb] - r[s.ja])
-            # rounding-level forces and penetrations do not change the set (avoids cycling
-            # between equivalent sets at a degenerate contact edge)
-            new = self.cover(np.where(A, force > -1e-12 * fscale, opening < -1e-12 * dscale), opening)
-            self.stats["iterations"] = it
-            log.debug("fast path: iteration %d, %d active pairs, %d change", it, int(A.sum()), int((new != A).sum()))
-            if np.array_equal(new, A):
-                return r, force, A
-            key = new.tobytes()
-            if key in seen:
-                what = "fast path: the active set cycles; use the CVXPY path"
-                raise SolverError(f"{what} (solver='CLARABEL')", cli=f"{what} (--solver CLARABEL)")
-            seen.add(key)
-            A = new
-        what = f"fast path: no convergence in {MAX_ITER} active-set iterations; use the CVXPY path"
-        raise SolverError(f"{what} (solver='CLARABEL')", cli=f"{what} (--solver CLARABEL)")
-
-
-def transfer_active(coarse_x: np.ndarray, coarse_active: np.ndarray, fine_x: np.ndarray) -> np.ndarray:
-    """Initial active set on finer pairs: the coarse active set, its edges put halfway to the
-    first inactive coarse pair (the best guess a coarse solution gives)."""
-    return np.interp(fine_x, coarse_x, coarse_active.astype(float)) >= 0.5
+        A = self.initial() if active is None else cover(np.asarray(active, bool), s.eps, self.jumps)
+        A, (r, _) = iterate(self, A)
+        return r, A
 
 
 def limit(system: System) -> dict:
@@ -273,7 +250,7 @@ def limit(system: System) -> dict:
     :func:`cvxdual.linalg.factor.backends` is timed, each after a small factorisation
     that pays its one-time start-up; the fastest is the limit."""
     t0 = time.perf_counter()
-    base = _Base(ActiveSet(system), np.ones(len(system.jb), bool), factorize=False)
+    base = _Base(DisplacementSolver(system), np.ones(len(system.jb), bool), factorize=False)
     t1 = time.perf_counter()
     K = base.K_lower
     times = {}
@@ -292,33 +269,15 @@ def limit(system: System) -> dict:
             **{f"t_limit_{m}": sum(t) for m, t in times.items()}}
 
 
-def start_up(method: str | None = None) -> None:
-    """Pay one-time library start-up (BLAS thread discovery, the first factorisation by ``method``,
-    default the large systems' backend): steady-state timings, as :func:`limit` takes for every
-    backend it times."""
-    with one_blas_thread():
-        SPDFactor(sp.identity(8, format="csr"), method or backend()).solve(np.ones(8))
-
-
-@functools.cache
-def _openblas():
-    from threadpoolctl import ThreadpoolController
-    return ThreadpoolController().select(internal_api="openblas")
-
-
-def one_blas_thread():
-    """A context with OpenBLAS on one thread: the fast path's dense work is small (Schur
-    complements of at most MAX_UPDATE columns), and threads spinning against MKL's (and
-    other processes') made it 10-100 times slower at random on a shared machine."""
-    return _openblas().limit(limits=1)
-
-
-def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
-    """Displacements ``u`` (all dofs) and solver statistics."""
+def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.ndarray, SolverStats]:
+    """Displacements ``u`` (all dofs) and the solver's statistics (its final active set in
+    ``active``), from the initial active set ``active`` (default: the first pairs to touch)."""
     t0 = time.perf_counter()
-    ps = ActiveSet(system)
+    solver = DisplacementSolver(system)
     with one_blas_thread():
-        r, _, A = ps.solve(active)
-    info = {"solver": "fast", "status": "optimal", "backend": ps.backend, **ps.stats,
-            "solve_time": time.perf_counter() - t0, "active": A}
-    return system.Z @ r, info
+        r, A = solver.solve(active)
+    st = solver.stats
+    return system.Z @ r, SolverStats(
+        solver="fast", status="optimal", iterations=st.iterations, solve_time=time.perf_counter() - t0,
+        backend=st.backend, factorizations=st.factorizations, factor_time=st.factor_time,
+        schur_updates=st.schur_updates, max_update=st.max_update, refinements=st.refinements, active=A)

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..voigt import VOIGT_WEIGHT
 from .assembly import System
 
-VOIGT_WEIGHT = np.array([1.0, 1.0, 2.0])  # sigma:tau in Voigt form
 # points per direction for a solution's error against an exact field: 16 points a piece change
 # hertz's relative errors by ~1e-5 relative against an 8x8 rule, at under half a 6x6 rule's time
 # (reports/speed.md, "The quadrature rule's own error"); studies choose their own rule

@@ -8,9 +8,9 @@ import importlib
 
 # report and runner load pandas and Dask (0.3 s and more): on first use, so that the CLI's
 # other commands (which build this package's argument parser) do not pay for them
-_LAZY = {"fit_rate": ".report", "plot_error": ".report", "rates": ".report", "write_outputs": ".report",
+_LAZY = {"fit_rate": ".report", "plot_error": ".report", "rates": ".report", "write_report": ".report",
          "run": ".runner", "Case": ".spec", "Reference": ".spec", "Study": ".spec", "StudyError": ".spec",
-         "builtin_specs": ".spec", "load_spec": ".spec"}
+         "load_spec": ".spec"}
 
 
 def __getattr__(name):
@@ -18,5 +18,5 @@ def __getattr__(name):
         return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-__all__ = ["Case", "Reference", "Study", "StudyError", "builtin_specs", "fit_rate", "load_spec", "plot_error",
-           "rates", "run", "write_outputs"]
+__all__ = ["Case", "Reference", "Study", "StudyError", "fit_rate", "load_spec", "plot_error", "rates", "run",
+           "write_report"]

@@ -260,7 +260,7 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
         kw["stress_space"] = case.stress_space
     if dict(case.tags).get("timing") == "steady":
         # one-time library start-up first (imports, solver set-up), as the limit excludes its own
-        from ..p0.fast import start_up
+        from ..linalg.factor import start_up
         solve(scene, case.triangulation, 0, case.solver, check=False, fallback=False)
         if case.solver == "fast":
             start_up()
@@ -356,7 +356,7 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
 
 def edge_share(sol, ex, rule: int) -> float:
     """Share of the squared L2 error within ``EDGE_RADIUS * a`` of the Hertz contact edges."""
-    from ..p0.norms import VOIGT_WEIGHT
+    from ..voigt import VOIGT_WEIGHT
     pts, w, idx = sol.pieces.quadrature(rule)
     body = sol.pieces.body[idx]
     ref = np.empty((len(pts), 3))
@@ -372,12 +372,13 @@ def edge_share(sol, ex, rule: int) -> float:
 def _limit(case: Case, scene) -> dict:
     """The speed "limit" (:func:`cvxdual.p0.fast.limit`): the fastest factorisation plus solve of the
     stiffness, all pairs closed, among the installed backends."""
-    from .. import assemble, discretize, fast
+    from .. import assemble, discretize
+    from ..p0.fast import limit
     t0 = time.perf_counter()
     mesh, pieces, ties = discretize(scene, case.triangulation, case.level)
     system = assemble(mesh, pieces, ties)
     t1 = time.perf_counter()
-    lim = fast.limit(system)
+    lim = limit(system)
     return {"status": "optimal", "n_pieces": int(system.n_pieces), "h": float(mesh.h), "t_setup": t1 - t0,
             **lim, "t_total": time.perf_counter() - t0, "error_l2": np.nan, "error_l2_rel": np.nan}
 

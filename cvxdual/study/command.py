@@ -1,4 +1,4 @@
-"""``cvxdual study``: ``run SPEC`` and the built-in shortcuts (``convergence``, ``speed``, ...)."""
+"""``cvxdual study run SPEC``: run the study of a spec file."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from .spec import DEFAULT_CACHE, DEFAULT_MEMORY
 EPILOG = """examples:
   cvxdual study run my_study.toml --out out/my_study
   cvxdual study run my_study.toml --scheduler tcp://10.0.0.5:8786   # a running `dask scheduler`
-  cvxdual study convergence --quick                                  # a built-in spec
-A spec is a TOML (or Python) file: see cvxdual/study/spec.py and the specs in studies/.
+  cvxdual study run studies/specs/convergence.toml --quick          # the project's convergence study
+A spec is a TOML (or Python) file: see docs/studies.md and the project's specs in studies/specs/.
 Finished cases are cached (--cache), so an interrupted study resumes where it stopped."""
 
 
@@ -30,23 +30,16 @@ def _options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="the spec's quick variant (coarse levels)")
 
 
-def add_parser(sub, shortcuts) -> argparse.ArgumentParser:
+def add_parser(sub) -> argparse.ArgumentParser:
     """Add ``study`` to the subparsers ``sub`` of the main parser."""
     st = sub.add_parser("study", help="run a study: a spec of scenes, levels, solvers and overrides on Dask",
                         description="Run a study (a spec of cases) on a Dask cluster and write its table, "
                         "report and plots.", epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ss = st.add_subparsers(dest="study_command", required=True, metavar="{run," + ",".join(shortcuts) + ",peers}")
+    ss = st.add_subparsers(dest="study_command", required=True)
     r = ss.add_parser("run", help="run the study of a spec file (TOML or Python)",
                       description="Run the study of a spec file (TOML or Python).")
-    r.add_argument("spec", help="spec file (.toml or .py) or a built-in spec name")
+    r.add_argument("spec", help="spec file (.toml or .py)")
     _options(r)
-    for name in shortcuts:
-        s = ss.add_parser(name, help=f"the built-in {name} study", description=f"The built-in {name} study "
-                          f"(cvxdual/study/specs/{name}.*).")
-        _options(s)
-        s.set_defaults(spec=name)
-    from .peers import add_parser as add_peers
-    add_peers(ss)  # not a spec: the same problem solved by another FE code, in its own environment
     return st
 
 

@@ -314,7 +314,7 @@ def markdown(df: pd.DataFrame, study, out_name: str) -> str:
     return "\n".join(lines)
 
 
-def write_outputs(df: pd.DataFrame, study, out: str | Path) -> list[Path]:
+def write_report(df: pd.DataFrame, study, out: str | Path) -> list[Path]:
     """Write ``NAME.csv``, ``NAME_h.png``, ``NAME_time.png`` and ``NAME.md`` to ``out``."""
     from ..outputs.output_set import prepare_dir
     out = prepare_dir(out)

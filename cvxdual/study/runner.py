@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..p0.norms import VOIGT_WEIGHT
 from ..validate import one_line
+from ..voigt import VOIGT_WEIGHT
 from .cache import Cache
 from .cases import (
     REQUIRED,
@@ -49,7 +49,7 @@ CONNECT_TIMEOUT = "20s"
 def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, workers: int | None = None,
         memory_limit: str | None = DEFAULT_MEMORY, cache: str | Path | None = DEFAULT_CACHE, quiet: bool = False,
         quick: bool = False, client=None) -> pd.DataFrame:
-    """Run the study ``spec`` (a path, a built-in spec name, a dict or a loaded :class:`Study`)
+    """Run the study ``spec`` (a spec file, a dict or a loaded :class:`Study`)
     and return its table; with ``out``, also write ``NAME.csv``, ``NAME.md`` and the plots there.
 
     ``scheduler``: the address of a running Dask scheduler (default: a local cluster of
@@ -74,8 +74,8 @@ def run(spec, out: str | Path | None = None, *, scheduler: str | None = None, wo
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
     if out is not None:
-        from .report import write_outputs
-        write_outputs(df, study, out)
+        from .report import write_report
+        write_report(df, study, out)
     return df
 
 

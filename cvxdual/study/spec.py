@@ -42,10 +42,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import CvxdualError
+from ..geometry.triangulation import TRIANGULATIONS
+from ..pipeline import STRESS_SPACES
 from ..validate import file_stem
 
-STRESS_SPACES = ("p0", "eq")
-TRIANGULATIONS = ("type1", "type2")
 PSEUDO_SOLVERS = ("fast", "limit")
 METRIC_DEFAULTS = {"rule": 6, "check_rule": 10, "ref_rule": 2, "ref_fine": 6, "ref_check_rule": 3,
                    "ref_check_fine": 8, "check": "finest", "edge_share": False}
@@ -53,7 +53,6 @@ KEYS = {"name", "title", "description", "scenes", "triangulations", "stress_spac
         "reference", "metrics", "check", "solver_options", "units", "compare", "isolate", "timeout", "profile",
         "tags", "cases", "quick", "hooks", "group", "report", "overrides"}
 BLOCK_KEYS = KEYS - {"name", "title", "description", "cases", "hooks", "report"} | {"name"}
-BUILTIN_SPECS = Path(__file__).resolve().parent / "specs"
 DEFAULT_CACHE = ".cache/cvxdual"  # finished cases, for resuming
 DEFAULT_MEMORY = "4GB"  # per local worker
 
@@ -229,26 +228,17 @@ def load_module(path: Path):
 
 
 def resolve_spec_path(source: str | Path) -> Path:
-    """A spec file: a path, or the name of a built-in spec (``convergence``, ``speed``, ...)."""
+    """The spec file ``source`` (a .toml or .py path), resolved."""
     p = Path(source)
     if p.is_file():
         return p.resolve()
-    for suffix in (".toml", ".py"):
-        q = BUILTIN_SPECS / f"{source}{suffix}"
-        if q.is_file() and not p.suffix:
-            return q
-    names = ", ".join(builtin_specs())
-    raise StudyError(f"study spec {str(source)!r} does not exist; give a .toml or .py file, or a built-in "
-                     f"spec ({names})")
-
-
-def builtin_specs() -> list[str]:
-    return sorted(p.stem for p in BUILTIN_SPECS.glob("*.*") if p.suffix in (".toml", ".py")
-                  and not p.stem.startswith("_"))
+    what = "is not a file" if p.exists() else "does not exist"
+    raise StudyError(f"study spec {str(source)!r} {what}; give a .toml or .py spec file (the project's own "
+                     "studies are in studies/specs/ of the repository)")
 
 
 def load_spec(source, quick: bool = False) -> Study:
-    """A :class:`Study` from a spec file (TOML or Python), a built-in spec name, or a dict."""
+    """A :class:`Study` from a spec file (TOML or Python) or a dict."""
     path, mod = None, None
     if isinstance(source, dict):
         raw = copy.deepcopy(source)

@@ -5,7 +5,7 @@ both bodies): the P0 dual on the fast path, and the equilibrium (Johnson-Mercier
 with the certified energy bracket, ``G`` and the bound ``sqrt(2G)`` on the combined error of
 the P1 displacement and the equilibrium stresses (docs/equilibrium.md). On ``hertz`` the
 true errors against the exact field give the effectivity ``sqrt(2G) / true``.
-Run: ``cvxdual study bounds [--quick] [--out reports]``.
+Run: ``python studies/bounds.py [--quick]`` (or ``cvxdual study run studies/specs/bounds.py``).
 """
 
 from __future__ import annotations

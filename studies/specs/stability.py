@@ -3,7 +3,7 @@ path) and both triangulations, taken unchecked so that degraded solutions are sh
 
 Not one grid, so a Python spec: ``SPEC`` lists the cases as blocks; ``report`` writes the
 tables per group and the observations computed from them.
-Run: ``cvxdual study stability [--quick] [--out reports]``.
+Run: ``python studies/stability.py [--quick]`` (or ``cvxdual study run studies/specs/stability.py``).
 """
 
 from __future__ import annotations

@@ -1,0 +1,147 @@
+"""The run in the equilibrium stress space (docs/equilibrium.md): the P1 displacement of the P0
+fast path, the exactly admissible equilibrium stresses of the same mesh (the fast route of
+:mod:`cvxdual.eq.fast` or the CVXPY model :class:`~cvxdual.eq.model.EquilibriumModel`), the
+certified bounds between the two and the errors against an exact field, as one
+:class:`~cvxdual.solution.Solution`. :func:`certify` adds the same bounds to a P0 solution.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import SolverError
+from ..geometry.triangulation import discretize
+from ..model.solvers import FAST, TIME_LIMIT_OPTION
+from ..p0.assembly import assemble
+from ..p0.fast import solve_fast
+from ..p0.run import NOTHING_ACTS, nothing_acts, warm_start_pairs
+from ..progress import Deadline, phase
+from ..reference.exact import exact_field
+from ..scene import Scene
+from ..solution import Solution, SolverStats, check_solution
+from .bounds import (
+    admissibility_residuals,
+    certified_bounds,
+    constraint_blocks,
+    contact_slack,
+    contact_tractions,
+    exact_errors,
+)
+from .contact import edge_contact
+from .space import EquilibriumSpace, check_flat
+
+
+def eq_stresses(space: EquilibriumSpace, solver: str, pairs: tuple | None = None,
+                **solver_options) -> tuple[np.ndarray, SolverStats]:
+    """Exactly admissible vertex stresses ``(n_sub, 3, 3)`` on ``space`` and the solver's
+    statistics. The fast route starts from the active contact ``pairs = (x, active)`` of a P0
+    solve on the same mesh (one iteration when the P0 contact zone is right, a few more where
+    P0 locks), or from the coarser levels without them."""
+    if solver == FAST:
+        from .fast import active_from_pairs, solve_eq_fast
+        start = None if pairs is None else active_from_pairs(space, *pairs)
+        y, stats = solve_eq_fast(space, start)
+        return space.stresses(y), stats
+    from .model import EquilibriumModel  # loads CVXPY: only for the CVXPY path
+    model = EquilibriumModel(space)
+    stats = model.solve(solver, **solver_options)
+    return model.stresses(), stats
+
+
+def certify(sol: Solution) -> Solution:
+    """``sol`` (a P0 solution on a flat-face scene) with the certified bounds of its displacement
+    against the equilibrium stresses of the same mesh (solved by the fast route whatever solved
+    ``sol``: the same QP, exact), the time added to its recovery."""
+    t0 = time.perf_counter()
+    space = EquilibriumSpace.from_mesh(sol.mesh)
+    sigma, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
+    bounds = certified_bounds(space, sigma, sol.displacement)
+    dt = time.perf_counter() - t0
+    timings = {**sol.timings, "recover": sol.timings["recover"] + dt, "total": sol.timings["total"] + dt}
+    return replace(sol, bounds=bounds, space=space, timings=timings)
+
+
+def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True,
+             warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
+             **solver_options) -> Solution:
+    """The "eq" run (see :func:`cvxdual.solve`): the P1 displacement from the fast path, the
+    equilibrium stresses on the same mesh, the certified bounds between them and the errors
+    against an exact field. (Flat faces: both triangulations are the same mesh.)"""
+    check_flat(scene)
+    deadline = deadline or Deadline()
+    t0 = time.perf_counter()
+    with phase("mesh", deadline) as p:
+        system = assemble(*discretize(scene, triangulation, level))
+        p.detail = f"level {level}: {len(system.mesh.points)} nodes, {system.n_dofs} dofs of the P1 displacement"
+    t1 = time.perf_counter()
+    with phase("assemble", deadline) as p:
+        space = EquilibriumSpace.from_mesh(system.mesh)
+        p.detail = f"equilibrium space: {space.n_y} stress unknowns on {3 * space.n_tri} sub-triangles"
+    t2 = time.perf_counter()
+    if nothing_acts(system):  # zero stresses and displacements are the solution
+        u = np.zeros(system.n_dofs)
+        sigma = np.zeros((3 * space.n_tri, 3, 3))
+        stats = SolverStats(solver=NOTHING_ACTS, status="optimal", iterations=0)
+    else:
+        name = "fast path" if solver == FAST else solver
+        with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({name})") as p:
+            try:
+                start = warm_start_pairs(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
+                u, p0_stats = solve_fast(system, start)
+                pairs = (system.mesh.pair_x, p0_stats.active)
+            except SolverError:
+                if solver == FAST:
+                    raise
+                from ..p0.dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
+                model = DualModel(system)
+                model.solve(solver, time_limit=deadline.remaining() if solver in TIME_LIMIT_OPTION else None)
+                u, pairs = model.displacements(), None
+            if solver != FAST:
+                solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
+                                  "verbose": verbose, **solver_options}
+            sigma, stats = eq_stresses(space, solver, pairs, **solver_options)
+            p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
+    t3 = time.perf_counter()
+    with phase("recover", deadline) as p:
+        times = {"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2}
+        sol = eq_solution(scene, triangulation, level, system, space, sigma, u, stats, times)
+        p.detail = "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
+    if check:
+        check_solution(sol)
+    return sol
+
+
+def eq_solution(scene, triangulation, level, system, space, sigma, u, stats: SolverStats, times: dict) -> Solution:
+    """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma`` and ``u``; ``times``
+    of the phases before (the recovery's and the total are added)."""
+    t3 = time.perf_counter()
+    blocks = constraint_blocks(space)
+    b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
+    v = b["displacement"]
+    res = admissibility_residuals(space, sigma, blocks)
+    sc = space.scales
+    delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
+    _, smin, _ = contact_slack(space, v)
+    res = {"admissibility": max(res.values()), **res,
+           "penetration": float(max(0.0, -smin.min(initial=0.0)) / delta)}
+    exact = exact_field(scene)
+    error = None
+    t_err = time.perf_counter()
+    if exact is not None:
+        e = exact_errors(space, sigma, v, exact)
+        error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
+                 "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
+                 "displacement_energy": e["displacement_a"],
+                 "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else None}
+    t4 = time.perf_counter()
+    t_err = t4 - t_err
+    energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
+    contact = edge_contact(system, -contact_tractions(space, sigma, blocks), v)
+    return Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
+                    stress=sigma, displacement=v, solver=stats,
+                    timings={**times, "recover": t4 - t3, "error": t_err, "total": sum(times.values()) + t4 - t3},
+                    objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res, contact=contact,
+                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)
