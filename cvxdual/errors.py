@@ -6,7 +6,6 @@ problem and how to fix it; the CLI prints it as one line and exits non-zero.
 
 from __future__ import annotations
 
-
 __all__ = ["AccuracyError", "CvxdualError", "MeshError", "ModelError", "NoAdmissibleStressError", "OutputError",
            "SceneError", "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError"]
 

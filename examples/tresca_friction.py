@@ -103,8 +103,8 @@ from pathlib import Path
 import numpy as np
 
 import cvxdual
-from cvxdual.voigt import VOIGT_WEIGHT
 from cvxdual.reference import HertzData, hertz_line_contact, hertz_pressure
+from cvxdual.voigt import VOIGT_WEIGHT
 
 G_OVER_P0 = 0.1  # the Tresca threshold g = 0.1 p0
 # "similar": steel on steel, the cylinder meshed unlike the block (no mirror symmetry, see above)

@@ -148,7 +148,6 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
     import scipy
 
     import cvxdual
-
     from cvxdual.linalg.factor import backend
     from cvxdual.pipeline import build_system, solve
     from cvxdual.reference import exact_field

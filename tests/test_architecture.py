@@ -248,7 +248,8 @@ def test_active_set_iteration_lives_in_the_core():
 def test_the_package_installs_nothing():
     """No module of the package runs pip or another installer (peer benchmarks that do live in
     studies/, outside the wheel)."""
-    pattern = re.compile(r"""["']-m["']\s*,\s*["'](pip|ensurepip|venv)["']|["'](pip|pip3|uv|conda)["']\s*,\s*["']install""")
+    pattern = re.compile(r"""["']-m["']\s*,\s*["'](pip|ensurepip|venv)["']"""
+                         r"""|["'](pip|pip3|uv|conda)["']\s*,\s*["']install""")
     assert [m for m, f in _modules().items() if pattern.search(f.read_text())] == []
 
 

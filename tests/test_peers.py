@@ -7,9 +7,8 @@ import csv
 import sys
 
 import numpy as np
-import pytest
-
 import peers  # studies/peers.py, on the path by conftest.py
+import pytest
 
 import cvxdual
 

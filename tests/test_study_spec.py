@@ -8,7 +8,6 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
 from run_study import SPECS  # studies/, on the path by conftest.py
 
 from cvxdual.cli import main

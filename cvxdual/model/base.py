@@ -306,8 +306,8 @@ class ConvexModel:
         the solver is given what the compile left of it."""
         problem = self.problem
         lf = self.load_factor
-        cacheable = (not self.limit_analysis and solver in internals.conic_solvers() and not set(options) & CVXPY_OPTIONS
-                     and problem.is_dpp())
+        cacheable = (not self.limit_analysis and solver in internals.conic_solvers()
+                     and not set(options) & CVXPY_OPTIONS and problem.is_dpp())
 
         def run(opts: dict) -> float:
             if not cacheable:

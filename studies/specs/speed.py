@@ -58,7 +58,7 @@ SPEC = {
         "Machine: 2 cores, shared; every measurement in its own process with one thread (`studies/speed.py` runs "
         "one case at a time), all ratios from one run. Paths: `cvxpy` = the dual QP built in CVXPY and solved by "
         "Clarabel (the reference path); `fast` = the condensed displacement form solved by a primal-dual "
-        "active set method with sparse SPD factorisations, warm-started from level L-2 (`cvxdual.fast`, `cvxdual.p0.fast`). "
+        "active set method with sparse SPD factorisations, warm-started from level L-2 (`cvxdual.p0.fast`). "
         "`limit` = the fastest sparse SPD factorisation plus solve of the stiffness `K` (all contact pairs "
         "closed) that cvxdual can call, the same size and sparsity as the fast path's matrix; it excludes "
         "building `K`."),
