@@ -101,8 +101,8 @@ def _cmd_solve(args) -> int:
                     max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
     written, t_write = [], None
     if out is not None:
-        with phase("write", start=f"outputs to {out}/" if not args.no_plots else None) as p:
-            written = write_outputs(sol, out, plots=not args.no_plots)
+        with phase("write", start=f"outputs to {out}/" if args.plots else None) as p:
+            written = write_outputs(sol, out, plots=args.plots)
             p.detail = f"{len(written)} files"
         t_write = p.seconds
     print(human_summary(sol, written, t_write))
@@ -195,7 +195,9 @@ def build_parser() -> argparse.ArgumentParser:
     talk.add_argument("--quiet", action="store_true", help="no progress lines on stderr (warnings and errors only)")
     talk.add_argument("--verbose", action="store_true", help="also the solver's own log and the fast path's "
                       "iterations, on stderr")
-    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s.add_argument("--plots", action=argparse.BooleanOptionalAction, default=False,
+                   help="also draw the figures (stress.png, deformed.png, pressure.png, bounds.png): matplotlib's "
+                   "import and drawing cost more than a whole small run (default: --no-plots)")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
     from .study.command import add_parser as add_study_parser

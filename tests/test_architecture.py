@@ -260,8 +260,8 @@ def test_fast_cli_run_imports_no_heavy_library_it_does_not_use(tmp_path, plots):
     can have loaded them."""
     import subprocess
     import sys
-    argv = ["solve", "--level", "0", "--solver", "fast", "--out", str(tmp_path / "o")] + ([] if plots else
-                                                                                      ["--no-plots"])
+    argv = ["solve", "--level", "0", "--solver", "fast", "--out", str(tmp_path / "o")] + (["--plots"] if plots else
+                                                                                      [])
     code = (f"import sys; from cvxdual.cli import main; assert main({argv!r}) == 0; "
             "print(sorted(m for m in ('cvxpy', 'pandas', 'dask', 'matplotlib', 'scipy.optimize') if m in sys.modules))")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)

@@ -26,7 +26,7 @@ def test_scenes_lists_builtins(capsys):
 
 def test_solve_writes_the_output_contract(tmp_path, capsys):
     out = tmp_path / "res"
-    assert main(["solve", "--scene", "hertz", "--level", "1", "--out", str(out)]) == 0
+    assert main(["solve", "--scene", "hertz", "--level", "1", "--out", str(out), "--plots"]) == 0
     text = capsys.readouterr().out
     assert "optimal" in text and "Hertz" in text
     s = json.loads((out / "summary.json").read_text())

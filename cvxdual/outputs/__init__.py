@@ -5,6 +5,7 @@
 
 import importlib
 
+from .figures import figures
 from .output_set import write_outputs
 
 _LAZY = {name: ".plots" for name in ("plot_stress", "plot_deformed", "plot_gap", "plot_pressure", "plot_bound_map")}
@@ -17,5 +18,5 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["plot_bound_map", "plot_deformed", "plot_gap", "plot_pressure", "plot_stress", "write_outputs",
-           "write_vtu"]
+__all__ = ["figures", "plot_bound_map", "plot_deformed", "plot_gap", "plot_pressure", "plot_stress",
+           "write_outputs", "write_vtu"]

@@ -1,9 +1,11 @@
-"""Writing results: ``summary.json``, ``contact.csv``, ``solution.vtu`` and plots, as one set.
+"""Writing results: ``summary.json``, ``contact.csv``, ``solution.vtu`` and, on request, the
+figures, as one set.
 
 The output directory holds one set and is replaced whole (:func:`write_outputs`): the set is
 written into a hidden staging directory beside it and swapped in atomically by
 :func:`cvxdual.files.replace_dir`, so it is always the previous set or the new one, never a mix,
-and files of an earlier set that the new one lacks (plots after ``--no-plots``) are gone.
+and files of an earlier set that the new one lacks (figures, after a run without ``--plots``) are
+gone.
 Because the directory is replaced, a directory holding anything else is refused
 (:func:`check_output_dir`), and so are the filesystem root, the current and the home directory.
 """
@@ -112,8 +114,10 @@ def write_contact_csv(sol, path) -> None:
     np.savetxt(path, cols, fmt=fmt, delimiter=",", header=",".join(CONTACT_COLUMNS), comments="")
 
 
-def write_outputs(sol, out: str | Path, plots: bool = True) -> list[Path]:
+def write_outputs(sol, out: str | Path, plots: bool = False) -> list[Path]:
     """Write every output of ``sol`` as the set in directory ``out``; return the paths written.
+    ``plots``: the figures too (:mod:`cvxdual.outputs.figures`; matplotlib's import and drawing
+    take longer than a whole small run, so they are written on request).
 
     The set replaces ``out`` whole (see the module docstring): any failure leaves the previous
     set (or none), never a mix, and the error says so."""
