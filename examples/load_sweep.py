@@ -94,7 +94,7 @@ def sweep(level: int = 3, steps: int = 20, solver: str = "CLARABEL") -> dict:
     ``half_width`` (``x_max`` of the active set), ``hertz_a`` (``sqrt(lf) a(P)``), ``spacing``
     (pair spacing at ``hertz_a``), ``error_spacings`` (``(half_width - hertz_a) / spacing``),
     ``total_force`` (sum of the contact forces, a half model: ``lf P / 2``), ``compile_time``
-    (CVXPY's ``problem.compilation_time`` of each solve), ``solve_time``, ``iterations``,
+    (CVXPY's ``problem.compilation_time`` of each solve), ``solve_time`` (the solver's own clock), ``iterations``,
     ``same_program`` (CVXPY's cached parametrised program is the one of the first solve); and
     ``model`` (solved at the last level), ``problems`` (number of distinct parametrised programs
     CVXPY built), ``program`` (the first one), ``hertz`` (:class:`HertzData` at ``P``), ``level``,
@@ -113,9 +113,9 @@ def sweep(level: int = 3, steps: int = 20, solver: str = "CLARABEL") -> dict:
         c = model.solution().contact
         half.append(c["x_max"])
         total.append(c["total_force"])
-        comp.append(info["compile_time"])
-        solve.append(info["solve_time"])
-        iters.append(info["iterations"])
+        comp.append(info.compile_time)
+        solve.append(info.solver_time)  # the solver's own clock
+        iters.append(info.iterations)
         # CVXPY keeps the parametrised program of the first compile in its cache; a solve that
         # recanonicalised would put a new one there (or rebuild the problem)
         programs.append(problem._cache.param_prog if model.problem is problem else None)
