@@ -4,6 +4,7 @@ specs (studies/specs/) in their quick variants on one shared local cluster."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -167,3 +168,11 @@ def test_bounds_spec_small(client, tmp_path):
     assert (eq.loc[0.4999].error_l2_rel / eq.loc[0.3].error_l2_rel).max() < 2
     text = (tmp_path / "bounds.md").read_text()
     assert "## Findings" in text and (tmp_path / "bounds.png").stat().st_size > 10000
+
+
+def test_report_names_a_command_a_reader_can_retype(tmp_path, monkeypatch):
+    from cvxdual.study.report import shown_path
+    (tmp_path / "specs").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(tmp_path / "specs" / "s.toml") == "specs/s.toml"  # inside: relative, runnable from here
+    assert shown_path(Path("/elsewhere/s.toml")) == "s.toml"  # outside: only the name
