@@ -63,13 +63,13 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
     triangulation = check_triangulation(triangulation)
     if check_stress_space(stress_space) == "eq":
         from .eq.model import EquilibriumModel
-        from .eq.space import EquilibriumSpace, check_flat
-        check_flat(scene)
+        from .eq.space import EquilibriumSpace
         if scene.friction is not None:
             raise CvxdualError("the equilibrium stress space is frictionless; drop the scene's friction or use "
                                "stress_space='p0'")
         system = build_system(scene, triangulation, level)
-        return EquilibriumModel(EquilibriumSpace.from_mesh(system.mesh), limit_analysis, system)
+        space = EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
+        return EquilibriumModel(space, limit_analysis, system)
     return dual_model(build_system(scene, triangulation, level), triangulation, limit_analysis)
 
 
@@ -123,9 +123,6 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     if solver == FAST and solver_options:
         raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
                           "drop them or choose a CVXPY solver such as CLARABEL")
-    if stress_space == "eq" or bounds:
-        from .eq.space import check_flat
-        check_flat(scene)  # before any work
     check_size(scene, level, solver == FAST, stress_space, bounds, max_memory)
     attempt = partial(_attempt, scene, triangulation, level, stress_space, bounds, check=check,
                       warm_start=warm_start, deadline=deadline, verbose=verbose)

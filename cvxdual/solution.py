@@ -114,7 +114,8 @@ def load_scale(system: System) -> float:
 class Solution:
     """A solved scene, built complete by :func:`cvxdual.solve` and never changed afterwards.
     Arrays: ``stress`` ``(n_pieces, 3)`` (stress space ``p0``) or the Voigt values at the
-    vertices of every sub-triangle ``(n_sub, 3, 3)`` (``eq``), ``displacement`` ``(n_nodes, 2)``
+    vertices of every sub-triangle ``(n_sub, 3, 3)`` (``eq``, with ``column_stress`` on the curved
+    pieces), ``displacement`` ``(n_nodes, 2)``
     (for ``eq`` the P1 displacement of the bounds, pointwise admissible), contact arrays
     ``(n_pairs,)`` ordered by ``x``; ``timings`` in seconds per phase."""
 
@@ -137,6 +138,9 @@ class Solution:
     # the checks applied ({name: residual}) and skipped ({name: reason}); None: all of tolerances()
     checks: dict | None = None
     space: object | None = None  # the EquilibriumSpace of an "eq" solution or of the bounds
+    # an "eq" solution's column stresses on the curved pieces: the vertical stress g at both ends of
+    # every column (n_col, 2) (cvxdual.eq.columns); empty on flat faces, None for "p0"
+    column_stress: np.ndarray | None = None
 
     @property
     def mesh(self):

@@ -144,13 +144,6 @@ def test_p0_bounds_and_eq_beat_p0_on_hertz():
     assert 1.0 <= eq.error["effectivity"] <= 1.3
 
 
-def test_eq_refuses_curved_faces():
-    with pytest.raises(cd.SceneError, match="flat faces"):
-        cd.solve("cylinder-on-block", level=0, stress_space="eq")
-    assert main(["solve", "--scene", "cylinder-on-block", "--level", "0", "--stress-space", "eq",
-                 "--no-output"]) == 1
-
-
 def test_eq_contact_zone_and_no_load():
     """The contact zone of equilibrium stresses ends where the pressure does: the last active
     pair carries pressure, the next one none; an unloaded scene gives zero stresses and G = 0."""

@@ -90,8 +90,8 @@ def test_prandtl_lower_bound_through_the_model():
 
 
 def test_eq_model_misuse():
-    with pytest.raises(cd.CvxdualError, match="flat"):
-        cd.build_model("cylinder-on-block", level=0, stress_space="eq")
+    with pytest.raises(cd.CvxdualError, match="frictionless"):
+        cd.build_model(cd.load_scene("patch", [{"contact": {"friction": {"g": 1.0}}}]), level=0, stress_space="eq")
     model = cd.build_model("patch", level=0, stress_space="eq")
     with pytest.raises(cd.ModelError, match="not been solved"):
         model.stresses()

@@ -24,8 +24,9 @@ from ..geometry.boundary import supported
 from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
 from ..voigt import VOIGT_WEIGHT
+from .columns import CONCAVE1, column_gap
 from .element import MASS0, bary_gradients, frame_rows, internal_rows, sub_vertices
-from .space import CONTACT, FIXED, N_GAUSS, EquilibriumSpace, outward_normals
+from .space import FIXED, N_GAUSS, EquilibriumSpace, outward_normals
 
 ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"
 
@@ -45,16 +46,35 @@ def _edge_dof_rows(space: EquilibriumSpace, raw: np.ndarray, t: np.ndarray, j: n
     return _point_rows(t, j, a, frame_rows(space.edges["ng"][g])[np.arange(len(raw)), k], space.n_tri)
 
 
+def _field(space: EquilibriumSpace, M: sp.spmatrix) -> sp.csr_matrix:
+    """Rows on vertex values widened to the whole field (the column values after them)."""
+    return sp.hstack([M, sp.csr_matrix((M.shape[0], 2 * len(space.columns)))], format="csr")
+
+
+def _column_rows(space: EquilibriumSpace, f: np.ndarray, end: np.ndarray, coef: np.ndarray) -> sp.csr_matrix:
+    """Rows ``coef * g`` of the column value at end ``end`` (0 left, 1 right) of face intervals ``f``
+    (empty rows where ``f`` is no column)."""
+    where = np.full(len(space.faces), -1)
+    where[space.columns] = np.arange(len(space.columns))
+    w = where[f]
+    n = 27 * space.n_tri + 2 * len(space.columns)
+    col = np.where(w >= 0, 27 * space.n_tri + 2 * w + end, 0)  # no column: an empty row
+    return sp.csr_matrix((np.where(w >= 0, coef, 0.0), (np.arange(len(f)), col)), shape=(len(f), n))
+
+
 def constraint_blocks(space: EquilibriumSpace) -> dict:
-    """Every admissibility condition as ``name -> (matrix on vertex values, rhs, sense)``,
-    assembled from the geometry alone (not from the reduced basis), to check a stress field:
-    internal and shared-edge traction jumps, ``h_T div sigma = -h_T F``, fixed boundary
-    tractions, zero tangential contact traction, action = reaction, ``sigma_nn <= 0``."""
-    ed, n_T = space.edges, space.n_tri
+    """Every admissibility condition as ``name -> (matrix on the field, rhs, sense)``, the field
+    being the vertex values and then the column values (:func:`field_values`), assembled from
+    the geometry alone (not from the reduced basis), to check a stress field: internal and
+    shared-edge traction jumps, ``h_T div sigma = -h_T F``, fixed boundary tractions, the face
+    edges' tractions (``(0, g n_y)`` under a column, no tangential traction on a contact edge),
+    fixed column values, action = reaction of the vertical stresses, and their sign ``<= 0``."""
+    ed, n_T, faces = space.edges, space.n_tri, space.faces
     t12 = 12 * np.arange(n_T)[:, None] + np.arange(12)[None, :]
     t27 = 27 * np.arange(n_T)[:, None] + np.arange(27)[None, :]
     blk = assemble_blocks(t12, t27, internal_rows(space.X), (12 * n_T, 27 * n_T))
-    out = {"internal": (blk, np.zeros(12 * n_T), "=="), "divergence": (space.div, space.div_rhs, "==")}
+    out = {"internal": (_field(space, blk), np.zeros(12 * n_T), "=="),
+           "divergence": (_field(space, space.div), space.div_rhs, "==")}
     order = np.argsort(ed["id"].ravel(), kind="stable")
     inner = np.flatnonzero(ed["count"] == 2)
     start = np.searchsorted(ed["id"].ravel()[order], inner)
@@ -63,29 +83,67 @@ def constraint_blocks(space: EquilibriumSpace) -> dict:
     rep = lambda v: np.repeat(v, 4)  # noqa: E731 - four dofs per edge
     # the frame rows of both sides: both use n_g, so equal dofs mean equal tractions
     jump = _edge_dof_rows(space, raw, rep(t1), rep(j1)) - _edge_dof_rows(space, raw, rep(t2), rep(j2))
-    out["shared"] = (jump, np.zeros(len(raw)), "==")
-    b = ed["boundary"]
+    out["shared"] = (_field(space, jump), np.zeros(len(raw)), "==")
+    # the face intervals' edges: the traction at both ends, in the frame of the global edge
+    tied = np.flatnonzero(np.isin(np.arange(len(faces)), space.columns) | _in_contact(space))
+    f, end = np.repeat(tied, 2), np.tile([0, 1], len(tied))
+    eid = space.face_edge[f]
+    left_end = (ed["hi"][eid] == faces.left[f]).astype(int)
+    ge = np.where(end == 0, left_end, 1 - left_end)  # the global end of the interval's end
+    t, j = ed["owner"][eid].T
+    normal, tangential = (_field(space, _edge_dof_rows(space, 4 * eid + 2 * ge + k, t, j)) for k in (0, 1))
+    column = faces.column[f]
+    ng = ed["ng"][eid]
+    g_n, g_t = (_column_rows(space, f[column], end[column], c[column]) for c in (ng[:, 1] ** 2, ng[:, 0] * ng[:, 1]))
+    out["column_tie"] = (sp.vstack([normal[column] - g_n, tangential[column] - g_t], format="csr"),
+                         np.zeros(2 * int(column.sum())), "==")
+    out["contact_tangential"] = (tangential[~column], np.zeros(int((~column).sum())), "==")
+    # the vertical stress at each end: the column's g, or the flat edge's normal traction
+    vertical = (sp.diags((~column).astype(float)) @ normal + _column_rows(space, f, end, np.ones(len(f)))).tocsr()
+    raw_g = space.column_dofs.ravel()
+    fixed_g = space.kind[raw_g] == FIXED
+    every = _column_rows(space, np.repeat(space.columns, 2), np.tile([0, 1], len(space.columns)),
+                         np.ones(2 * len(space.columns)))
+    out["column_fixed"] = (every[fixed_g], space.z_fix[raw_g[fixed_g]], "==")
+    contact = _in_contact(space)[f]
+    upper = contact & (faces.body[f] == 0)
+    lower = contact & (faces.body[f] == 1)
+    out["action_reaction"] = (vertical[upper] - vertical[lower], np.zeros(int(upper.sum())), "==")
+    out["sign"] = (vertical[lower], np.zeros(int(lower.sum())), "<=")
+    # fixed tractions on the rest of the boundary (edges of the face intervals are checked above)
+    face_edges = np.zeros(len(ed["keys"]), bool)
+    face_edges[space.face_edge[tied]] = True
+    b = ed["boundary"][~face_edges[ed["boundary"]]]
     braw = (4 * b[:, None] + np.arange(4)[None, :]).ravel()
     bt, bj = np.repeat(ed["owner"][b, 0], 4), np.repeat(ed["owner"][b, 1], 4)
-    rows = _edge_dof_rows(space, braw, bt, bj)
-    is_contact_edge = np.repeat((space.kind[4 * b[:, None] + np.array([0, 2])] == CONTACT).any(1), 4)
     fixed = space.kind[braw] == FIXED
-    for name, m in (("traction", fixed & ~is_contact_edge), ("contact_tangential", fixed & is_contact_edge)):
-        out[name] = (rows[m], space.z_fix[braw[m]], "==")
-    con = np.flatnonzero(space.kind[braw] == CONTACT)
-    col = space.Tm[braw[con]].indices  # the shared parameter of each contact dof
-    upper = space.body[bt[con]] == 0
-    iu, il = con[upper][np.argsort(col[upper])], con[~upper][np.argsort(col[~upper])]
-    out["action_reaction"] = (rows[iu] - rows[il], np.zeros(len(iu)), "==")
-    out["sign"] = (rows[il], np.zeros(len(il)), "<=")
+    rows = _edge_dof_rows(space, braw[fixed], bt[fixed], bj[fixed])
+    out["traction"] = (_field(space, rows), space.z_fix[braw[fixed]], "==")
     return out
 
 
-def admissibility_residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> dict:
+def _in_contact(space: EquilibriumSpace) -> np.ndarray:
+    """Which face intervals lie in the contact interval (whose edges are the contact edges)."""
+    a, b = space.scene.contact
+    tol = 1e-12 * space.scene.length_scale  # contact ends are columns: only rounding separates them
+    return (space.faces.x[:, 0] >= a - tol) & (space.faces.x[:, 1] <= b + tol)
+
+
+def field_values(sigma: np.ndarray, g: np.ndarray | None = None) -> np.ndarray:
+    """The field as one vector: vertex values ``sigma`` (any shape holding ``27 n_T`` values) and
+    column values ``g`` ``(n_col, 2)`` (none on flat faces)."""
+    parts = [np.asarray(sigma, float).reshape(-1)]
+    if g is not None:
+        parts.append(np.asarray(g, float).reshape(-1))
+    return np.concatenate(parts)
+
+
+def admissibility_residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None,
+                            g: np.ndarray | None = None) -> dict:
     """Largest violation of each block of :func:`constraint_blocks` by vertex stresses
-    ``sigma`` (any shape holding ``27 n_T`` values), relative to the stress scale."""
+    ``sigma`` and column values ``g``, relative to the stress scale."""
     blocks = constraint_blocks(space) if blocks is None else blocks
-    s = np.asarray(sigma, float).reshape(-1)
+    s = field_values(sigma, g)
     out = {}
     for name, (M, rhs, sense) in blocks.items():
         r = M @ s - rhs
@@ -94,48 +152,50 @@ def admissibility_residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: 
     return out
 
 
-
-
 # -- the displacement side ---------------------------------------------------------------
 
-def _quadratic_gap(space: EquilibriumSpace) -> bool:
-    """Flat faces plus a flat or parabolic gap profile: ``eps`` is a quadratic in ``x``."""
-    return space.scene.gap_profile.kind in ("flat", "parabola")
+# rounding of the closed forms of the curvature bounds: they are widened by this fraction
+CURVATURE_MARGIN = 1e-9
+
+
+def gap_curvature_bound(space: EquilibriumSpace, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
+    """A guaranteed upper bound ``M`` of the gap's second derivative on each interval
+    ``[x0, x1]``: ``eps = f_u - f_l + g`` (upper face, lower face, gap profile), so
+    ``eps'' <= max f_u'' - min f_l'' + max g''`` (each profile's ``curvature_range``, from its
+    closed form), widened by :data:`CURVATURE_MARGIN` of the terms for their rounding."""
+    sc = space.scene
+    (_, hu), (ll, _), (_, hg) = (p.curvature_range(x0, x1) for p in (sc.upper.face, sc.lower.face, sc.gap_profile))
+    return hu - ll + hg + CURVATURE_MARGIN * (np.abs(hu) + np.abs(ll) + np.abs(hg))
 
 
 def contact_slack(space: EquilibriumSpace, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``eps - [v]`` at the pairs ``(n_pairs,)`` and its minimum over each contact edge
-    ``(n_c,)``; exact (vertex of a parabola) when the gap is quadratic, else sampled densely
-    (then the last value, ``exact``, is false)."""
+    """``eps - [v]`` at the pairs ``(n_pairs,)`` and a guaranteed lower bound of its minimum over
+    each contact edge ``(n_c,)``. ``[v]`` is linear between pairs (on the curved pieces ``v`` is
+    the chord's or polygon's value extended along y), so ``s = eps - [v]`` has ``s'' <= M``
+    (:func:`gap_curvature_bound`), and then ``s >= s0 (1 - u) + s1 u + kappa u (1 - u)`` with
+    ``kappa = -M d^2 / 2`` (``d`` the edge's length, ``u`` in ``[0, 1]``): its minimum, the vertex
+    of a parabola, bounds ``s`` from below at every ``x`` (for a quadratic gap it is ``s`` itself).
+    The last value says the bound is rigorous (always, here)."""
     up, lo = space.mesh.pairs.T
     x = space.mesh.pair_x
     s = space.scene.gap_at(x) - (v[lo, 1] - v[up, 1])
     s0, s1 = s[:-1], s[1:]
-    if _quadratic_gap(space):
-        # eps - linear = s0 (1 - u) + s1 u + kappa u (1 - u) on each edge, u in [0, 1]; a convex
-        # gap has kappa < 0, and then the minimum can lie between the pairs
-        xm = 0.5 * (x[:-1] + x[1:])
-        eps = space.scene.gap_at
-        kappa = 4.0 * eps(xm) - 2.0 * (eps(x[:-1]) + eps(x[1:]))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.clip(0.5 + (s1 - s0) / (2.0 * kappa), 0.0, 1.0)
-        u = np.where(kappa < 0, u, 0.0)
-        smin = np.minimum(np.minimum(s0, s1), s0 * (1 - u) + s1 * u + kappa * u * (1 - u))
-        return s, smin, True
-    u = np.linspace(0.0, 1.0, 401)
-    xs = x[:-1, None] + u[None, :] * np.diff(x)[:, None]
-    lin = (v[lo, 1] - v[up, 1])
-    rel = lin[:-1, None] * (1 - u) + lin[1:, None] * u
-    return s, (space.scene.gap_at(xs) - rel).min(1), False
+    kappa = -0.5 * gap_curvature_bound(space, x[:-1], x[1:]) * np.diff(x) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.clip(0.5 + (s1 - s0) / (2.0 * kappa), 0.0, 1.0)
+    u = np.where(kappa < 0, u, 0.0)
+    smin = np.minimum(np.minimum(s0, s1), s0 * (1 - u) + s1 * u + kappa * u * (1 - u))
+    return s, smin, True
 
 
 def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Make a P1 displacement ``u (n_nodes, 2)`` pointwise admissible on the whole contact
-    interval: ``[u]`` is linear between pairs, the convex gap lies *below* its chord, so
-    ``[u] = eps`` at two pairs means ``[u] > eps`` in between. On every contact edge with
-    ``min (eps - [u]) < margin`` the lower face nodes of the edge are lowered (the upper ones
-    raised if the lower are supported) by the deficit; a node takes the larger shift of its two
-    edges. Supports are untouched, so the result stays in ``V``."""
+    """Make a displacement ``u (n_nodes, 2)`` of ``V_h`` pointwise admissible on the whole contact
+    interval: ``[u]`` is linear between pairs, a convex gap lies *below* its chord, so
+    ``[u] = eps`` at two pairs means ``[u] > eps`` in between. On every contact edge whose
+    guaranteed minimum slack (:func:`contact_slack`) is below a margin the lower face nodes of the
+    edge are lowered (the upper ones raised if the lower are supported) by the deficit; a node
+    takes the larger shift of its two edges, and a type-1 tied node follows its face node, so the
+    result stays in ``V_h``. Supports are untouched, so it stays in ``V``."""
     v = np.array(u, float).reshape(-1, 2)
     _, smin, exact = contact_slack(space, v)
     sc = space.scales
@@ -151,8 +211,12 @@ def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.
     on_lower = ~fixed[lo, 1]
     if np.any((shift > 0) & fixed[lo, 1] & fixed[up, 1]):
         raise SceneError("a contact pair has both y displacements supported; supports must not act on the contact")
-    v[lo[on_lower], 1] -= shift[on_lower]
-    v[up[~on_lower], 1] += shift[~on_lower]
+    dy = np.zeros(len(v))
+    dy[lo[on_lower]] = -shift[on_lower]
+    dy[up[~on_lower]] = shift[~on_lower]
+    tied = space.pieces.nodes[space.pieces.kind == CONCAVE1]  # (A, B, C): C moves with B
+    dy[tied[:, 2]] = dy[tied[:, 1]]
+    v[:, 1] += dy
     _, smin2, _ = contact_slack(space, v)
     return v, {"max_shift": float(shift.max(initial=0.0)), "n_shifted": int(np.sum(shift > 0)),
                "min_slack_before": float(smin.min()), "min_slack": float(smin2.min()), "exact_min": exact,
@@ -162,7 +226,7 @@ def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.
 def strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
     """Engineering strains ``(e11, e22, 2 e12)`` ``(n_T, 3)`` of a P1 displacement ``v (n_nodes, 2)``."""
     g, _ = bary_gradients(space.X)  # (n_T, 3, 2)
-    vt = v[space.mesh.triangles()]  # (n_T, 3, 2)
+    vt = v[space.tri]  # (n_T, 3, 2)
     du = np.einsum("tai,taj->tij", vt, g)  # du_i/dx_j
     return np.stack([du[:, 0, 0], du[:, 1, 1], du[:, 0, 1] + du[:, 1, 0]], 1)
 
@@ -173,7 +237,7 @@ def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
     the unprojected data, the L2 projection being exact against linears)."""
     _, area = bary_gradients(space.X)
     F = np.array([b.body_force for b in space.scene.bodies])[space.body]
-    work = float(np.sum(area * np.einsum("tk,tk->t", F, v[space.mesh.triangles()].mean(1))))
+    work = float(np.sum(area * np.einsum("tk,tk->t", F, v[space.tri].mean(1))))
     ed = space.edges
     b = ed["boundary"]
     n_out, s_o = outward_normals(ed, space.X, space.mesh.points, b)
@@ -188,20 +252,35 @@ def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
     return work
 
 
+def slab_strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
+    """Strains ``(n_slabs, 3)`` of ``v`` on the curved pieces' slabs, where ``v`` is its face
+    edge's value extended along y: ``(dv_x/dx, 0, dv_y/dx)`` along that edge."""
+    a, b = space.pieces.slabs.edge_nodes.T
+    d = (v[b] - v[a]) / (space.mesh.points[b, 0] - space.mesh.points[a, 0])[:, None]
+    return np.stack([d[:, 0], np.zeros(len(d)), d[:, 1]], 1)
+
+
 def primal_energy(space: EquilibriumSpace, v: np.ndarray) -> float:
-    """``J(v) = 1/2 a(v, v) - L(v)``."""
+    """``J(v) = 1/2 a(v, v) - L(v)`` on the exact bodies: the straight triangles and every slab
+    of the curved pieces with its own strain (exactly: constant strains, exact areas)."""
     e = strains(space, v)
     _, area = bary_gradients(space.X)
-    C = np.stack([b.material.stiffness for b in space.scene.bodies])[space.body]
-    return 0.5 * float(np.sum(area * np.einsum("ti,tij,tj->t", e, C, e))) - load_work(space, v)
+    stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+    es = slab_strains(space, v)
+    slabs = space.pieces.slabs
+    curved = float(np.sum(space.pieces.slab_areas() * np.einsum("si,sij,sj->s", es, stiff[slabs.body], es)))
+    straight = float(np.sum(area * np.einsum("ti,tij,tj->t", e, stiff[space.body], e)))
+    return 0.5 * (straight + curved) - load_work(space, v)
 
 
 # -- the bounds ------------------------------------------------------------------------------
 
-def contact_tractions(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None) -> np.ndarray:
-    """``sigma_nn`` at both ends of each contact edge ``(n_c, 2)``, read from the lower face."""
+def contact_tractions(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict | None = None,
+                      g: np.ndarray | None = None) -> np.ndarray:
+    """The vertical stress (``sigma_nn`` on a flat face, ``g`` under a column) at both ends of each
+    contact edge ``(n_c, 2)``, read from the lower face: minus the contact pressure."""
     blocks = constraint_blocks(space) if blocks is None else blocks
-    return (blocks["sign"][0] @ np.asarray(sigma, float).reshape(-1)).reshape(-1, 2)
+    return (blocks["sign"][0] @ field_values(sigma, g)).reshape(-1, 2)
 
 
 def _contact_integrals(space: EquilibriumSpace, p: np.ndarray, v: np.ndarray | None) -> np.ndarray:
@@ -225,35 +304,39 @@ def _sub_energy(space: EquilibriumSpace, d: np.ndarray) -> np.ndarray:
 
 
 def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray,
-                     fix: bool = True, blocks: dict | None = None) -> dict:
-    """Two-sided energy bounds and the error bound of ``sigma`` (vertex values, ``27 n_T``
-    numbers) and a P1 displacement (made pointwise admissible first unless ``fix`` is false).
+                     fix: bool = True, blocks: dict | None = None, g: np.ndarray | None = None) -> dict:
+    """Two-sided energy bounds and the error bound of the field of vertex values ``sigma``
+    (``27 n_T`` numbers) and column values ``g`` ``(n_col, 2)`` (curved faces), and a displacement
+    of ``V_h`` (made pointwise admissible first unless ``fix`` is false).
 
     Returns ``energy_upper = J(v)``, ``energy_lower = -L(u0) - S(sigma)``, ``gap`` (``G`` as
     the sum of its non-negative terms), ``gap_identity`` (``J(v) + L(u0) + S(sigma)``),
     ``error_bound = sqrt(2 G)``, ``contributions`` (``element (n_T,)``, ``sub (n_T, 3)``,
-    ``contact (n_c,)``), ``data_oscillation``, ``residuals``, ``guaranteed`` and ``reasons``.
+    ``column (n_slabs,)`` on the curved pieces' slabs, ``contact (n_c,)``), ``data_oscillation``,
+    ``residuals``, ``guaranteed`` and ``reasons``.
     """
     blocks = constraint_blocks(space) if blocks is None else blocks
     sig = np.asarray(sigma, float).reshape(space.n_tri, 3, 3, 3)
-    res = admissibility_residuals(space, sig, blocks)
+    g = np.zeros((0, 2)) if g is None else np.asarray(g, float).reshape(-1, 2)
+    res = admissibility_residuals(space, sig, blocks, g)
     v, fixinfo = admissible_displacement(space, displacement) if fix else (np.asarray(displacement, float), {})
     _, smin, exact_min = contact_slack(space, v)
-    p = -contact_tractions(space, sig, blocks)
-    C = np.stack([b.material.stiffness for b in space.scene.bodies])[space.body]
-    ce = np.einsum("tij,tj->ti", C, strains(space, v))
+    p = -contact_tractions(space, sig, blocks, g)
+    stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+    ce = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
     sub = _sub_energy(space, sig - ce[:, None, None, :])
+    column = column_gap(space, g, np.einsum("sij,sj->si", stiff[space.pieces.slabs.body], slab_strains(space, v)))
     contact = _contact_integrals(space, p, v)
-    comp = float(_sub_energy(space, sig).sum())
+    comp = float(_sub_energy(space, sig).sum()) + 0.5 * float(g.ravel() @ (space.column_energy_matrix() @ g.ravel()))
     pe = float(_contact_integrals(space, p, None).sum())
     J = primal_energy(space, v)
-    G = float(sub.sum() + contact.sum())
+    G = float(sub.sum() + column.sum() + contact.sum())
     osc = data_oscillation(space)
     reasons = []
     if max(res.values()) > ADMISSIBLE_TOL:
         reasons.append(f"sigma violates admissibility by {max(res.values()):.2g} (relative)")
     if smin.min() < 0 or not exact_min:
-        reasons.append("v not shown pointwise admissible on the contact interval (gap not quadratic)")
+        reasons.append("v not shown pointwise admissible on the contact interval")
     if osc > 0:
         reasons.append("tractions not linear on edges: bounds hold for the projected data; "
                        f"data oscillation {osc:.3g} not included")
@@ -261,7 +344,7 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
         reasons.append("v does not vanish on the supports")
     return {"energy_upper": J, "energy_lower": -(comp + pe), "gap": G, "gap_identity": J + comp + pe,
             "error_bound": float(np.sqrt(2.0 * max(G, 0.0))), "complementary_energy": comp,
-            "contributions": {"element": sub.sum(1), "sub": sub, "contact": contact},
+            "contributions": {"element": sub.sum(1), "sub": sub, "column": column, "contact": contact},
             "data_oscillation": osc, "residuals": res, "displacement": v, "displacement_fix": fixinfo,
             "guaranteed": not reasons, "reasons": reasons}
 
@@ -282,36 +365,51 @@ def data_oscillation(space: EquilibriumSpace) -> float:
 
 # -- comparison with an exact field -----------------------------------------------
 
-def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray, exact, n: int = 6) -> dict:
-    """Errors against an exact stress ``exact.stress(body, points)``: ``l2_rel`` of ``sigma``
-    (``||.||_0`` with ``s:s = s11^2 + s22^2 + 2 s12^2``), ``stress_A = ||sigma - lam*||_A``,
-    ``displacement_a = ||lam* - C e(v)||_A = ||u - v||_a`` (``lam* = C e(u)``), ``combined`` (the
-    root sum of squares, which ``error_bound`` must dominate) and ``l2_rel`` of ``C e(v)``.
-    Tensor Gauss rule with ``n*n`` points per sub-triangle."""
+def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray, exact, n: int = 6,
+                 g: np.ndarray | None = None) -> dict:
+    """Errors against an exact stress ``exact.stress(body, points)``: ``l2_rel`` of the field
+    (vertex values ``sigma``, column values ``g``; ``||.||_0`` with ``s:s = s11^2 + s22^2 +
+    2 s12^2``), ``stress_A = ||sigma - lam*||_A``, ``displacement_a = ||lam* - C e(v)||_A =
+    ||u - v||_a`` (``lam* = C e(u)``), ``combined`` (the root sum of squares, which ``error_bound``
+    must dominate) and ``l2_rel`` of ``C e(v)``. Tensor Gauss rules with ``n*n`` points per
+    sub-triangle and per slab of the curved pieces."""
     rs, w = triangle_rule(n)
     P = space.sub_points()  # (n_sub, 3, 2)
     lam = np.stack([1 - rs.sum(1), rs[:, 0], rs[:, 1]], 1)  # (q, 3) barycentrics
-    pts = np.einsum("qa,sai->sqi", lam, P)
     _, area = bary_gradients(P)
-    wq = 2.0 * area[:, None] * w[None, :]
-    sh = np.einsum("qa,sai->sqi", lam, np.asarray(sigma, float).reshape(-1, 3, 3))
-    body = np.repeat(space.body, 3)
-    C = np.stack([b.material.stiffness for b in space.scene.bodies])
-    ce = np.repeat(np.einsum("tij,tj->ti", C[space.body], strains(space, displacement)), 3, axis=0)
+    stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+    ce = np.repeat(np.einsum("tij,tj->ti", stiff[space.body], strains(space, displacement)), 3, axis=0)
+    pts = [np.einsum("qa,sai->sqi", lam, P).reshape(-1, 2)]
+    wq = [(2.0 * area[:, None] * w[None, :]).ravel()]
+    body = [np.repeat(np.repeat(space.body, 3), len(w))]
+    field = [np.einsum("qa,sai->sqi", lam, np.asarray(sigma, float).reshape(-1, 3, 3)).reshape(-1, 3)]
+    kin = [np.repeat(ce, len(w), axis=0)]
+    if len(space.pieces.slabs):
+        g = np.asarray(g, float).reshape(-1, 2)
+        sp_, sw, si = space.pieces.slab_quadrature(n)
+        iv = space.columns[space.slab_column[si]]
+        x0, x1 = space.faces.x[iv, 0], space.faces.x[iv, 1]
+        t = (sp_[:, 0] - x0) / (x1 - x0)
+        gx = g[space.slab_column[si], 0] * (1 - t) + g[space.slab_column[si], 1] * t
+        sbody = space.pieces.slabs.body[si]
+        pts.append(sp_), wq.append(sw), body.append(sbody)
+        field.append(np.stack([np.zeros(len(gx)), gx, np.zeros(len(gx))], 1))
+        es = slab_strains(space, displacement)[si]
+        kin.append(np.einsum("sij,sj->si", stiff[sbody], es))
+    pts, wq, body, sh, ce = (np.concatenate(v) for v in (pts, wq, body, field, kin))
     ref = np.empty_like(sh)
     for k in range(2):
         m = body == k
-        ref[m] = exact.stress(k, pts[m].reshape(-1, 2)).reshape(-1, len(w), 3)
-    A = np.linalg.inv(C)[body]
-    vw = VOIGT_WEIGHT
+        ref[m] = exact.stress(k, pts[m])
+    A = np.linalg.inv(stiff)[body]
 
     def sq(d, M=None):
-        return float(np.sum(wq * (np.einsum("sqi,i,sqi->sq", d, vw, d) if M is None
-                                  else np.einsum("sqi,sij,sqj->sq", d, M, d))))
+        return float(np.sum(wq * (np.einsum("qi,i,qi->q", d, VOIGT_WEIGHT, d) if M is None
+                                  else np.einsum("qi,qij,qj->q", d, M, d))))
     ref0 = sq(ref)
-    e_s, e_u = sq(sh - ref, A), sq(ref - ce[:, None, :], A)
+    e_s, e_u = sq(sh - ref, A), sq(ref - ce, A)
     return {"l2": float(np.sqrt(sq(sh - ref))), "l2_rel": float(np.sqrt(sq(sh - ref) / ref0)),
             "stress_A": float(np.sqrt(e_s)),
             "displacement_a": float(np.sqrt(e_u)), "combined": float(np.sqrt(e_s + e_u)),
             "reference_A": float(np.sqrt(sq(ref, A))),
-            "l2_rel_displacement": float(np.sqrt(sq(ref - ce[:, None, :]) / ref0))}
+            "l2_rel_displacement": float(np.sqrt(sq(ref - ce) / ref0))}

@@ -53,7 +53,9 @@ def triangle_dofs(space: EquilibriumSpace) -> np.ndarray:
 
 def local_blocks(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
     """Energy ``H (n_T, 15, 15)`` (``1/2 z.H z = 1/2 int sigma:A sigma``, exact P1 mass per
-    sub-triangle) and divergence rows ``B (n_T, 6, 15)`` in the local parameters, physical units."""
+    sub-triangle) and divergence rows ``B (n_T, 6, 15)`` in the local parameters, physical units.
+    A column's energy goes to the triangle of its face edge, whose tied normal slots hold its
+    ``g`` (:func:`cvxdual.eq.space.tie_basis`): each column then belongs to one triangle."""
     n_T = space.n_tri
     _, area = bary_gradients(sub_vertices(space.X))
     A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body]
@@ -62,7 +64,20 @@ def local_blocks(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
     for i in range(3):  # three sub-triangles; vectorised over the mesh
         Ni = space.basis[:, 9 * i: 9 * i + 9, :]
         H += area[:, i, None, None] * (Ni.transpose(0, 2, 1) @ (K9 @ Ni))
+    t, slots = column_slots(space)
+    np.add.at(H, (t[:, None, None], slots[:, :, None], slots[:, None, :]), space.column_energy_blocks)
     return H, divergence_rows(space.X)[0] @ space.basis
+
+
+def column_slots(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
+    """The triangle of each column's face edge and the local slots ``(n_col, 2)`` of its ``g`` at
+    the left and right end (the tied normal slots)."""
+    ed = space.edges
+    eid = space.face_edge[space.columns]
+    t, j = ed["owner"][eid].T
+    left_end = (ed["hi"][eid] == space.faces.left[space.columns]).astype(int)  # global end of the left end
+    ge = np.stack([left_end, 1 - left_end], 1)
+    return t, 4 * j[:, None] + 2 * (ge ^ ed["flip"][t, j][:, None])
 
 
 def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, first: np.ndarray) -> np.ndarray:
@@ -324,7 +339,7 @@ def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
     (:func:`cvxdual.fast.core.coarse_start`: every coarser level warm-started the same way, all
     in contact below level 2), transferred to ``space.contact_x``; ``None`` below level 2."""
     def solve_at(level: int, coarser):
-        sp = EquilibriumSpace.from_scene(space.scene, level)
+        sp = EquilibriumSpace.from_scene(space.scene, level, space.triangulation)
         start = None if coarser is None else active_from_pairs(sp, *coarser)
         return sp.contact_x, HybridSolver(sp).run(start)["active"].reshape(-1, 2)
 

@@ -62,31 +62,42 @@ class EquilibriumModel(ConvexModel):
         rhs = (space.div_rhs - space.div @ sigma0) / s
         self._constraints = {"equilibrium": B @ self.y == lf * rhs, "contact": self.y[ci] <= 0}
         self._vertex = S @ self.y + lf * (sigma0 / s)  # vertex values over s
+        self._column = space.column_map @ self.y + lf * (space.column0 / s)  # column values over s
         if self.limit_analysis:
             self._default = cp.Maximize(lf)
             self.constant = 0.0
         else:
-            Q = space.energy_matrix()
+            F, f0, Q = space.field_map, space.field0, space.field_energy_matrix()
             e_ref = sc.energy
-            H = (S.T @ (Q @ S)).tocsr() * (s**2 / e_ref)
-            lin_load = (S.T @ (Q @ sigma0)) * (s / e_ref)
+            H = (F.T @ (Q @ F)).tocsr() * (s**2 / e_ref)
+            lin_load = (F.T @ (Q @ f0)) * (s / e_ref)
             lin_gap = np.zeros(space.n_y)
             lin_gap[ci] = -space.gap_weights().ravel() * (s / e_ref)
             energy = 0.5 * cp.quad_form(self.y, H, assume_PSD=True) + lf * (lin_load @ self.y) + lin_gap @ self.y
             self._default = cp.Minimize(energy)
-            self.constant = 0.5 * float(sigma0 @ (Q @ sigma0))  # objective offset at load_factor 1 (physical)
+            self.constant = 0.5 * float(f0 @ (Q @ f0))  # objective offset at load_factor 1 (physical)
         self._objective = self._default
         self.y_exact: np.ndarray | None = None  # parameters of the exact field per unit load (physical)
 
     # -- expressions in physical units -----------------------------------------------------
     @property
     def stress(self):
-        return self.space.scales.stress * cp.reshape(self._vertex, (9 * self.space.n_tri, 3), order="C")
+        """Voigt stresses at the stress points: the vertices of every sub-triangle, then both ends of
+        every column (``(0, g, 0)``: a column's stress is linear in ``x`` and constant in ``y``, so a
+        convex function of it is largest at one of them)."""
+        vertex = cp.reshape(self._vertex, (9 * self.space.n_tri, 3), order="C")
+        n = 2 * len(self.space.columns)
+        if not n:
+            return self.space.scales.stress * vertex
+        zero = np.zeros((n, 1))
+        column = cp.hstack([zero, cp.reshape(self._column, (n, 1), order="C"), zero])
+        return self.space.scales.stress * cp.vstack([vertex, column])
 
     @property
     def vertex_body(self) -> np.ndarray:
-        """``(9 n_T,)`` body index (0 upper, 1 lower) of every row of :attr:`stress`."""
-        return np.repeat(self.space.body, 9)
+        """Body index (0 upper, 1 lower) of every row of :attr:`stress`."""
+        sp = self.space
+        return np.concatenate([np.repeat(sp.body, 9), np.repeat(sp.faces.body[sp.columns], 2)])
 
     @property
     def contact_pressure(self):
@@ -130,6 +141,11 @@ class EquilibriumModel(ConvexModel):
         self._require_solved()
         return float(self.load_factor.value) * self.space.stresses(self.y_exact)
 
+    def column_stresses(self) -> np.ndarray:
+        """``(n_col, 2)`` the columns' vertical stress ``g`` at both ends, of the last solve."""
+        self._require_solved()
+        return float(self.load_factor.value) * self.space.column_values(self.y_exact)
+
     def solution(self, check: bool = True) -> Solution:
         """A :class:`~cvxdual.Solution` (stress space ``eq``) of the exact field: admissibility
         and the user's constraints checked at it; the bounds, the displacement and the error
@@ -142,9 +158,9 @@ class EquilibriumModel(ConvexModel):
         t0 = time.perf_counter()
         space, s = self.space, self.space.scales.stress
         lf = float(self.load_factor.value)
-        sigma = self.stresses()
+        sigma, g = self.stresses(), self.column_stresses()
         blocks = constraint_blocks(space)
-        res = admissibility_residuals(space, sigma / lf, blocks)  # the blocks hold the unit load's data
+        res = admissibility_residuals(space, sigma / lf, blocks, g / lf)  # the blocks hold the unit load's data
         applied = {"admissibility": max(res.values())}
         if self._user:
             solved = self.y.value
@@ -157,14 +173,15 @@ class EquilibriumModel(ConvexModel):
         skipped = {"bounds": f"the bounds need the P1 displacement; {why}",
                    "displacement": "the equilibrium space has no displacement (zero is stored)",
                    "error": f"not computed here; {why}"}
-        system = self.system or assemble(*discretize(space.scene, "type1", space.mesh.level))
+        tri = space.triangulation
+        system = self.system or assemble(*discretize(space.scene, tri, space.mesh.level))
         contact = edge_contact(system, -lf * self.y_exact[space.contact_y], None, lf)
-        sol = Solution(scene=space.scene, triangulation="type1", stress_space="eq", level=int(space.mesh.level),
+        sol = Solution(scene=space.scene, triangulation=tri, stress_space="eq", level=int(space.mesh.level),
                        system=system, stress=sigma, displacement=np.zeros((space.mesh.n_nodes, 2)),
                        solver=self.info,
                        timings=self._timings(time.perf_counter() - t0),
                        objective=float("nan"), duality_gap=float("nan"), residuals={**applied, **res},
-                       contact=contact, exact=None, error=None, space=space,
+                       contact=contact, exact=None, error=None, space=space, column_stress=g,
                        checks={"applied": applied, "skipped": skipped})
         if check:
             tol = {**EQ_TOLERANCES, "user_constraints": USER_TOLERANCE}

@@ -31,24 +31,24 @@ from .bounds import (
     exact_errors,
 )
 from .contact import edge_contact
-from .space import EquilibriumSpace, check_flat
+from .space import EquilibriumSpace
 
 
 def eq_stresses(space: EquilibriumSpace, solver: str, pairs: tuple | None = None,
-                **solver_options) -> tuple[np.ndarray, SolverStats]:
-    """Exactly admissible vertex stresses ``(n_sub, 3, 3)`` on ``space`` and the solver's
-    statistics. The fast route starts from the active contact ``pairs = (x, active)`` of a P0
-    solve on the same mesh (one iteration when the P0 contact zone is right, a few more where
-    P0 locks), or from the coarser levels without them."""
+                **solver_options) -> tuple[np.ndarray, np.ndarray, SolverStats]:
+    """Exactly admissible stresses on ``space``: vertex values ``(n_sub, 3, 3)``, column values
+    ``(n_col, 2)``, and the solver's statistics. The fast route starts from the active contact
+    ``pairs = (x, active)`` of a P0 solve on the same mesh (one iteration when the P0 contact zone
+    is right, a few more where P0 locks), or from the coarser levels without them."""
     if solver == FAST:
         from .fast import active_from_pairs, solve_eq_fast
         start = None if pairs is None else active_from_pairs(space, *pairs)
         y, stats = solve_eq_fast(space, start)
-        return space.stresses(y), stats
+        return space.stresses(y), space.column_values(y), stats
     from .model import EquilibriumModel  # loads CVXPY: only for the CVXPY path
     model = EquilibriumModel(space)
     stats = model.solve(solver, **solver_options)
-    return model.stresses(), stats
+    return model.stresses(), model.column_stresses(), stats
 
 
 def certify(sol: Solution) -> Solution:
@@ -56,9 +56,9 @@ def certify(sol: Solution) -> Solution:
     against the equilibrium stresses of the same mesh (solved by the fast route whatever solved
     ``sol``: the same QP, exact), the time added to its recovery."""
     t0 = time.perf_counter()
-    space = EquilibriumSpace.from_mesh(sol.mesh)
-    sigma, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
-    bounds = certified_bounds(space, sigma, sol.displacement)
+    space = EquilibriumSpace.from_pieces(sol.mesh, sol.pieces, sol.triangulation)
+    sigma, g, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
+    bounds = certified_bounds(space, sigma, sol.displacement, g=g)
     dt = time.perf_counter() - t0
     timings = {**sol.timings, "recover": sol.timings["recover"] + dt, "total": sol.timings["total"] + dt}
     return replace(sol, bounds=bounds, space=space, timings=timings)
@@ -67,10 +67,9 @@ def certify(sol: Solution) -> Solution:
 def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True,
              warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
              **solver_options) -> Solution:
-    """The "eq" run (see :func:`cvxdual.solve`): the P1 displacement from the fast path, the
-    equilibrium stresses on the same mesh, the certified bounds between them and the errors
-    against an exact field. (Flat faces: both triangulations are the same mesh.)"""
-    check_flat(scene)
+    """The "eq" run (see :func:`cvxdual.solve`): the displacement of ``V_h`` from the fast path,
+    the equilibrium stresses on the same pieces (column stresses on the curved ones), the
+    certified bounds between them and the errors against an exact field."""
     deadline = deadline or Deadline()
     t0 = time.perf_counter()
     with phase("mesh", deadline) as p:
@@ -78,12 +77,13 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
         p.detail = f"level {level}: {len(system.mesh.points)} nodes, {system.n_dofs} dofs of the P1 displacement"
     t1 = time.perf_counter()
     with phase("assemble", deadline) as p:
-        space = EquilibriumSpace.from_mesh(system.mesh)
-        p.detail = f"equilibrium space: {space.n_y} stress unknowns on {3 * space.n_tri} sub-triangles"
+        space = EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
+        p.detail = (f"equilibrium space: {space.n_y} stress unknowns on {3 * space.n_tri} sub-triangles"
+                    + (f" and {len(space.columns)} columns" if len(space.columns) else ""))
     t2 = time.perf_counter()
     if nothing_acts(system):  # zero stresses and displacements are the solution
         u = np.zeros(system.n_dofs)
-        sigma = np.zeros((3 * space.n_tri, 3, 3))
+        sigma, g = np.zeros((3 * space.n_tri, 3, 3)), np.zeros((len(space.columns), 2))
         stats = SolverStats(solver=NOTHING_ACTS, status="optimal", iterations=0)
     else:
         name = "fast path" if solver == FAST else solver
@@ -102,26 +102,27 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
             if solver != FAST:
                 solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
                                   "verbose": verbose, **solver_options}
-            sigma, stats = eq_stresses(space, solver, pairs, **solver_options)
+            sigma, g, stats = eq_stresses(space, solver, pairs, **solver_options)
             p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
     t3 = time.perf_counter()
     with phase("recover", deadline) as p:
         times = {"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2}
-        sol = eq_solution(scene, triangulation, level, system, space, sigma, u, stats, times)
+        sol = eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats, times)
         p.detail = "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
     if check:
         check_solution(sol)
     return sol
 
 
-def eq_solution(scene, triangulation, level, system, space, sigma, u, stats: SolverStats, times: dict) -> Solution:
-    """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma`` and ``u``; ``times``
-    of the phases before (the recovery's and the total are added)."""
+def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: SolverStats,
+                times: dict) -> Solution:
+    """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma``, ``g`` and ``u``;
+    ``times`` of the phases before (the recovery's and the total are added)."""
     t3 = time.perf_counter()
     blocks = constraint_blocks(space)
-    b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks)
+    b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks, g=g)
     v = b["displacement"]
-    res = admissibility_residuals(space, sigma, blocks)
+    res = admissibility_residuals(space, sigma, blocks, g)
     sc = space.scales
     delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
     _, smin, _ = contact_slack(space, v)
@@ -131,7 +132,7 @@ def eq_solution(scene, triangulation, level, system, space, sigma, u, stats: Sol
     error = None
     t_err = time.perf_counter()
     if exact is not None:
-        e = exact_errors(space, sigma, v, exact)
+        e = exact_errors(space, sigma, v, exact, g=g)
         error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
                  "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
                  "displacement_energy": e["displacement_a"],
@@ -139,9 +140,10 @@ def eq_solution(scene, triangulation, level, system, space, sigma, u, stats: Sol
     t4 = time.perf_counter()
     t_err = t4 - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
-    contact = edge_contact(system, -contact_tractions(space, sigma, blocks), v)
+    contact = edge_contact(system, -contact_tractions(space, sigma, blocks, g), v)
     return Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
                     stress=sigma, displacement=v, solver=stats,
                     timings={**times, "recover": t4 - t3, "error": t_err, "total": sum(times.values()) + t4 - t3},
                     objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res, contact=contact,
-                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space)
+                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space,
+                    column_stress=g)

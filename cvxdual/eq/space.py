@@ -1,4 +1,4 @@
-"""An exactly admissible (equilibrium) stress space on flat-face scenes (docs/equilibrium.md).
+"""An exactly admissible (equilibrium) stress space (docs/equilibrium.md).
 
 The Johnson-Mercier / Watwood-Hartz element: every mesh triangle ``T`` (a *macro* triangle)
 is split at its barycentre ``c`` into the sub-triangles ``T_i = (X_i, X_{i+1}, c)``; on each
@@ -16,6 +16,14 @@ them free (supports); the upper and lower contact faces share one normal-tractio
 parameter per contact edge end (action = reaction), whose sign ``<= 0`` is a simple bound.
 Only ``div sigma + F = 0`` (6 rows per macro triangle) remains as an equality constraint.
 
+The macro triangles are the straight pieces of either triangulation. On the curved pieces the
+stress is a column field ``g(x) e_y (x) e_y`` (:mod:`cvxdual.eq.columns`), ``g`` linear on each
+face interval; the Johnson-Mercier traction of the interval's face edge (a chord, a polygon edge,
+a type-1 slanted side) is tied to it, ``sigma n = (0, g n_y)``, by merging the edge's two
+traction components at each end into one parameter, the vertical stress ``g`` there. On a flat
+face that tie is the identity; contact edges carry it on either face, so the shared contact
+parameter is the vertical stress at the edge end whatever the faces' shapes.
+
 Notation of the paper (Tran Van Bon 1986) and docs/theory.md: ``lam``/``sigma`` the stress, ``S_EP``
 the statically admissible set, ``eps`` the initial gap, ``A = C^-1`` the compliance, ``F`` the
 body force, ``P`` the prescribed traction, ``p = -sigma_nn >= 0`` the contact pressure.
@@ -32,12 +40,15 @@ import scipy.sparse as sp
 
 from ..errors import MeshError, SceneError, SolverError
 from ..geometry.boundary import supported
-from ..geometry.mesh import Mesh, build_mesh
+from ..geometry.mesh import Mesh
+from ..geometry.pieces import Pieces
 from ..geometry.quadrature import gauss01
 from ..geometry.rigid import candidates, check_balance
+from ..geometry.triangulation import discretize
 from ..linalg.sparse import assemble_blocks
 from ..p0.assembly import Scales
 from ..scene.scene import Scene
+from .columns import FaceIntervals, check_column_data, column_energy, face_intervals, slab_interval
 from .element import (
     MASS0,
     bary_gradients,
@@ -54,17 +65,22 @@ FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
 
 @dataclass(frozen=True)
 class EquilibriumSpace:
-    """The JM stress space of a flat-face mesh and its admissibility data (physical units);
-    built complete by :meth:`from_mesh` and never changed afterwards.
+    """The equilibrium stress space of a mesh and its pieces, with its admissibility data
+    (physical units); built complete by :meth:`from_pieces` and never changed afterwards.
 
-    Geometry: ``X (n_T, 3, 2)`` macro triangles, ``body (n_T,)``, ``basis (n_T, 27, 15)``.
-    Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) = ``Tm y + z_fix``;
-    vertex values ``sigma = P z = S y + sigma0`` (``S``: :attr:`stress_map`). ``div``: rows
-    ``h_T div sigma`` with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the ``y``
-    index of ``sigma_nn`` at both ends of each contact edge (``contact_x (n_c, 2)``).
+    Geometry: ``X (n_T, 3, 2)`` macro triangles (the straight pieces), ``body (n_T,)``, ``basis
+    (n_T, 27, 15)`` (the face edges' ties merged in). Raw parameters ``z`` (``4 n_E`` edge dofs,
+    then ``3 n_T`` bubbles) = ``Tm y + z_fix``; vertex values ``sigma = P z = S y + sigma0``
+    (``S``: :attr:`stress_map`); column values ``g = z[column_dofs]`` ``(n_col, 2)`` at both ends
+    of every column interval ``columns`` (indices into ``faces``; energy ``column_energy_blocks``). ``div``:
+    rows ``h_T div sigma`` with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the
+    ``y`` index of the vertical stress at both ends of each contact edge (``contact_x (n_c, 2)``).
     """
 
     mesh: Mesh
+    pieces: Pieces
+    triangulation: str  # of the pieces: "type1" or "type2"
+    tri: np.ndarray  # (n_T, 3) nodes of the macro triangles
     X: np.ndarray
     body: np.ndarray
     basis: np.ndarray
@@ -78,18 +94,24 @@ class EquilibriumSpace:
     contact_y: np.ndarray
     contact_x: np.ndarray
     traction_edges: dict
+    faces: FaceIntervals
+    face_edge: np.ndarray  # (m,) global edge of each face interval's face edge
+    columns: np.ndarray  # (n_col,) the face intervals with curved pieces
+    column_dofs: np.ndarray  # (n_col, 2) raw parameter of g at the left and right end
+    column_energy_blocks: np.ndarray  # (n_col, 2, 2) their energy: 1/2 g.Q g
+    slab_column: np.ndarray  # (n_slabs,) the column of each slab of ``pieces``
     scales: Scales
     load_imbalance: float
 
     @classmethod
-    def from_mesh(cls, mesh: Mesh) -> "EquilibriumSpace":
-        check_flat(mesh.scene)
-        return build_space(mesh)
+    def from_pieces(cls, mesh: Mesh, pieces: Pieces, triangulation: str) -> "EquilibriumSpace":
+        """The space of ``mesh`` and its ``pieces`` (of ``triangulation``: :func:`~cvxdual.geometry.discretize`)."""
+        return build_space(mesh, pieces, triangulation)
 
     @classmethod
-    def from_scene(cls, scene: Scene, level: int | None = None) -> "EquilibriumSpace":
-        check_flat(scene)
-        return cls.from_mesh(build_mesh(scene, level))
+    def from_scene(cls, scene: Scene, level: int | None = None, triangulation: str = "type1") -> "EquilibriumSpace":
+        mesh, pieces, _ = discretize(scene, triangulation, level)
+        return cls.from_pieces(mesh, pieces, triangulation)
 
     @property
     def scene(self) -> Scene:
@@ -119,6 +141,38 @@ class EquilibriumSpace:
         """``(n_sub, 3, 3)``: Voigt values at the vertices of sub-triangle ``3 t + i``."""
         return self.vertex_values(y).reshape(3 * self.n_tri, 3, 3)
 
+    @cached_property
+    def column_map(self) -> sp.csr_matrix:
+        """``C`` with column values ``g = C y + g0`` (``(2 n_col,)``, left and right ends)."""
+        return self.Tm[self.column_dofs.ravel()].tocsr()
+
+    @property
+    def column0(self) -> np.ndarray:
+        return self.z_fix[self.column_dofs.ravel()]
+
+    def column_values(self, y: np.ndarray) -> np.ndarray:
+        """``(n_col, 2)``: the vertical stress ``g`` of every column at its left and right end."""
+        return (self.column_map @ y + self.column0).reshape(-1, 2)
+
+    def column_energy_matrix(self) -> sp.csr_matrix:
+        """``Qc`` with ``1/2 g.Qc g = 1/2 int A_22 g^2`` over the columns, ``g`` as in :meth:`column_values`."""
+        idx = 2 * np.arange(len(self.columns))[:, None] + np.arange(2)[None, :]
+        n = 2 * len(self.columns)
+        return assemble_blocks(idx, idx, self.column_energy_blocks, (n, n))
+
+    # the whole field: vertex values, then column values (what the energy and the stress caps see)
+    @cached_property
+    def field_map(self) -> sp.csr_matrix:
+        return sp.vstack([self.stress_map, self.column_map]).tocsr()
+
+    @property
+    def field0(self) -> np.ndarray:
+        return np.concatenate([self.sigma0, self.column0])
+
+    def field_energy_matrix(self) -> sp.csr_matrix:
+        """The energy of the whole field: :meth:`energy_matrix` and :meth:`column_energy_matrix`."""
+        return sp.block_diag([self.energy_matrix(), self.column_energy_matrix()], format="csr")
+
     def sub_points(self) -> np.ndarray:
         """``(n_sub, 3, 2)`` sub-triangle vertices, in the order of :meth:`stresses`."""
         return sub_vertices(self.X).reshape(3 * self.n_tri, 3, 2)
@@ -141,14 +195,6 @@ class EquilibriumSpace:
         return np.stack([eps @ (1.0 - u), eps @ u], axis=1)
 
 
-def check_flat(scene: Scene) -> None:
-    """Refuse scenes with a curved face: the element needs straight macro triangles."""
-    curved = [b.name for b in scene.bodies if not b.face.is_flat()]
-    if curved:
-        raise SceneError(f"the equilibrium stress space needs flat faces, but body {curved[0]!r} has a curved "
-                         "face; use the P0 dual (cvxdual.solve, type 1/2 pieces) or flat faces with a gap profile")
-
-
 # -- building the space ------------------------------------------------------------------
 
 def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
@@ -169,12 +215,18 @@ def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
             "count": count, "boundary": bnd, "owner": owner, "length": np.linalg.norm(d, axis=1)}
 
 
-def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
-    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
-    idx = np.searchsorted(edges["keys"], keys)
-    if np.any(edges["keys"][np.minimum(idx, len(edges["keys"]) - 1)] != keys):
+def edge_keys(a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
+    return np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+
+
+def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int, missing: bool = False) -> np.ndarray:
+    """The edges between nodes ``a`` and ``b``; with ``missing``, -1 where there is none."""
+    keys = edge_keys(a, b, n_nodes)
+    idx = np.minimum(np.searchsorted(edges["keys"], keys), len(edges["keys"]) - 1)
+    found = edges["keys"][idx] == keys
+    if not missing and not found.all():
         raise MeshError("internal: a side edge is not an edge of the mesh")  # pragma: no cover
-    return idx
+    return np.where(found, idx, -1)
 
 
 def outward_normals(edges: dict, X: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,9 +237,11 @@ def outward_normals(edges: dict, X: np.ndarray, pts: np.ndarray, ids: np.ndarray
     return s_o[:, None] * edges["ng"][ids], s_o
 
 
-def part_edges(mesh: Mesh, edges: dict, k: int, part) -> tuple[np.ndarray, np.ndarray]:
-    """Edges (and their side nodes) of a boundary part: both ends in the part's interval
-    (x on face/far, y on left/right), the same selection as the P0 assembly."""
+def part_edges(mesh: Mesh, edges: dict, k: int, part, skip: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """Edges of a boundary part: both ends in the part's interval (x on face/far, y on
+    left/right), the same selection as the P0 assembly; node pairs with keys in ``skip``
+    (:func:`edge_keys`: the vertical sides of curved pieces, no edges of the straight mesh) are
+    left out and counted (the second value)."""
     nodes = mesh.bodies[k].side_nodes(part.on)
     inside = np.ones(len(nodes), bool)
     if part.interval is not None:
@@ -196,7 +250,9 @@ def part_edges(mesh: Mesh, edges: dict, k: int, part) -> tuple[np.ndarray, np.nd
         tol = 1e-12 * (abs(lo) + abs(hi) + 1.0)  # interval ends are nodes: only rounding separates them
         inside = (c >= lo - tol) & (c <= hi + tol)
     keep = inside[:-1] & inside[1:]
-    return edge_ids(edges, nodes[:-1][keep], nodes[1:][keep], mesh.n_nodes), nodes[inside]
+    a, b = nodes[:-1][keep], nodes[1:][keep]
+    ok = np.ones(len(a), bool) if skip is None else ~np.isin(edge_keys(a, b, mesh.n_nodes), skip)
+    return edge_ids(edges, a[ok], b[ok], mesh.n_nodes), int((~ok).sum())
 
 
 def project_traction(mesh: Mesh, edges: dict, k: int, ids: np.ndarray, n_out: np.ndarray, traction,
@@ -221,19 +277,54 @@ def project_traction(mesh: Mesh, edges: dict, k: int, ids: np.ndarray, n_out: np
     return np.stack([c0, c1], 1), ell * np.einsum("g,mgi->m", w, res**2)
 
 
-def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact) -> dict:
+def _covering(part, x: np.ndarray) -> np.ndarray:
+    """Which intervals ``x (m, 2)`` a face part covers (both ends inside, as :func:`part_edges`)."""
+    if part.interval is None:
+        return np.ones(len(x), bool)
+    lo, hi = part.interval
+    tol = 1e-12 * (abs(lo) + abs(hi) + 1.0)
+    return (x[:, 0] >= lo - tol) & (x[:, 1] <= hi + tol)
+
+
+def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals, face_edge: np.ndarray) -> dict:
     """Kind (free, fixed, contact) and fixed value of every raw edge dof ``4 g + 2 e + k``
     (``e`` the global end, ``k`` 0 normal, 1 tangential): boundary edges default to traction
-    free; traction parts fix their projected data; supports free the reaction components;
-    contact edges fix a zero tangential traction and share one normal parameter per end."""
+    free; traction parts fix their projected data; supports free the reaction components. Face
+    edges of contact and column intervals are *tied* (see the module docstring): their normal
+    dof at each end is the vertical stress there (one parameter per contact edge end shared by
+    both faces, a free or zero one on a column outside the contact), their tangential dofs 0."""
     n_raw = 4 * len(edges["keys"]) + 3 * len(X)
     kind, val = np.full(n_raw, FREE), np.zeros(n_raw)
     bnd = edges["boundary"]
     kind[(4 * bnd[:, None] + np.arange(4)).ravel()] = FIXED
+    a, b = mesh.scene.contact
+    tol = 1e-12 * mesh.scene.length_scale  # contact ends are columns: only rounding separates them
+    in_contact = (faces.x[:, 0] >= a - tol) & (faces.x[:, 1] <= b + tol)
+    tied = faces.column | in_contact
+    owned = np.zeros(len(edges["keys"]), bool)  # edges whose dofs the face intervals set
+    owned[face_edge[tied]] = True
+    vertical = faces.vertical >= 0
+    v_ids = edge_ids(edges, faces.vertical[vertical], faces.right[vertical], mesh.n_nodes, missing=True)
+    owned[v_ids[v_ids >= 0]] = True
+    skip = edge_keys(faces.vertical[vertical], faces.right[vertical], mesh.n_nodes)[v_ids < 0]  # on a side
+    column_kind = np.where(faces.column, FIXED, -1)  # a column off the contact: traction free unless supported
     trac = {"ids": [], "c": [], "osc2": [], "body": []}
     for k, bm in enumerate(mesh.bodies):
         for part in bm.body.boundary:
-            ids, _ = part_edges(mesh, edges, k, part)
+            ids, skipped = part_edges(mesh, edges, k, part, skip)
+            if part.kind == "traction" and (skipped or np.any(owned[ids])) and not _zero(part) and part.on != "face":
+                raise SceneError(f"body {bm.body.name!r}: part {part.name!r} loads the vertical side of a curved "
+                                 "type-1 piece, where the column stress carries nothing; use type2 or the P0 stress "
+                                 "space")
+            ids = ids[~owned[ids]]
+            if part.on == "face":
+                cover = faces.column & ~in_contact & (faces.body == k) & _covering(part, faces.x)
+                if part.kind == "clamped":
+                    column_kind[cover] = FREE  # a vertical traction is one a clamp can take
+                elif part.kind == "traction" and cover.any() and not _zero(part):
+                    raise SceneError(f"body {bm.body.name!r}: traction part {part.name!r} loads a curved stretch of "
+                                     "the face, where the equilibrium space carries vertical stresses only; move the "
+                                     "load off the curved stretch or use the P0 stress space")
             n_out, s_o = outward_normals(edges, X, mesh.points, ids)
             if part.kind == "traction":
                 c, osc2 = project_traction(mesh, edges, k, ids, n_out, part.traction, exact)
@@ -248,20 +339,50 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact) -> dict:
                 for e in range(2):
                     for comp in comps:
                         kind[4 * ids + 2 * e + comp] = FREE
-    pairs = mesh.pairs
-    up = edge_ids(edges, pairs[:-1, 0], pairs[1:, 0], mesh.n_nodes)
-    lo = edge_ids(edges, pairs[:-1, 1], pairs[1:, 1], mesh.n_nodes)
+    # the face edges' ends at the interval's left and right abscissa (global ends 0 = lo, 1 = hi)
+    left_end = (edges["hi"][face_edge] == faces.left).astype(int)
+    ends = np.stack([left_end, 1 - left_end], 1)
+    raw_n = 4 * face_edge[:, None] + 2 * ends  # (m, 2) normal dofs at left, right
+    kind[raw_n[tied] + 1] = FIXED
+    val[raw_n[tied]] = val[raw_n[tied] + 1] = 0.0
+    off = tied & ~in_contact
+    kind[raw_n[off]] = column_kind[off][:, None]
     cidx = np.full(n_raw, -1)
-    for ids, col in ((up, 0), (lo, 1)):
-        for xend in range(2):
-            e = (edges["hi"][ids] == pairs[xend:len(pairs) - 1 + xend, col]).astype(int)
-            kind[4 * ids + 2 * e], kind[4 * ids + 2 * e + 1] = CONTACT, FIXED
-            val[4 * ids + 2 * e] = val[4 * ids + 2 * e + 1] = 0.0
-            cidx[4 * ids + 2 * e] = 2 * np.arange(len(ids)) + xend
+    n_c = 0
+    for k in range(2):
+        j = np.flatnonzero(in_contact & (faces.body == k))  # the contact intervals in x order, one per contact edge
+        kind[raw_n[j]] = CONTACT
+        cidx[raw_n[j]] = 2 * np.arange(len(j))[:, None] + np.arange(2)[None, :]
+        n_c = len(j)
     cat = {key: np.concatenate(v) if v else np.empty(0) for key, v in trac.items()}
     cat["c"] = cat["c"].reshape(-1, 2, 2)
-    return {"kind": kind, "value": val, "contact": cidx, "traction": cat,
-            "contact_x": np.stack([mesh.pair_x[:-1], mesh.pair_x[1:]], 1)}
+    contact_x = faces.x[in_contact & (faces.body == 0)]
+    if len(contact_x) != n_c or not np.allclose(contact_x, faces.x[in_contact & (faces.body == 1)], rtol=0, atol=tol):
+        raise MeshError("internal: the contact intervals of the two faces differ")  # pragma: no cover
+    return {"kind": kind, "value": val, "contact": cidx, "traction": cat, "contact_x": contact_x,
+            "tied": np.flatnonzero(tied), "raw_n": raw_n}
+
+
+def _zero(part) -> bool:
+    """A traction part with zero uniform data (which a column's traction-free stretch meets)."""
+    return part.kind == "traction" and part.traction.kind == "uniform" and not np.any(part.traction.value)
+
+
+def tie_basis(basis: np.ndarray, edges: dict, face_edge: np.ndarray) -> np.ndarray:
+    """The local basis with the ties of the face edges ``face_edge`` merged in: at each end of
+    such an edge the normal column becomes ``n_gy^2 N_n + n_gx n_gy N_t`` (the vertex values of
+    ``sigma n_g = (0, g n_gy)``, the column field's traction, per unit ``g``) and the tangential
+    column 0 (its dof is fixed at 0). On a horizontal edge this is the identity."""
+    basis = basis.copy()
+    t, j = edges["owner"][face_edge].T
+    ng = edges["ng"][face_edge]
+    cn, ct = ng[:, 1] ** 2, ng[:, 0] * ng[:, 1]
+    for le in range(2):
+        n_slot = 4 * j + 2 * le
+        merged = cn[:, None] * basis[t, :, n_slot] + ct[:, None] * basis[t, :, n_slot + 1]
+        basis[t, :, n_slot] = merged
+        basis[t, :, n_slot + 1] = 0.0
+    return basis
 
 
 def vertex_map(basis: np.ndarray, edges: dict, n_raw: int) -> sp.csr_matrix:
@@ -275,20 +396,25 @@ def vertex_map(basis: np.ndarray, edges: dict, n_raw: int) -> sp.csr_matrix:
     return assemble_blocks(rows, dofmap, basis, (27 * n_T, n_raw))
 
 
-def build_space(mesh: Mesh) -> EquilibriumSpace:
-    """Assemble the space of ``mesh`` (see :class:`EquilibriumSpace`); balance the loads."""
+def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSpace:
+    """Assemble the space of ``mesh`` and its ``pieces`` (see :class:`EquilibriumSpace`);
+    balance the loads."""
     from ..reference.exact import exact_field
     scene = mesh.scene
-    tri = mesh.triangles()
+    straight = pieces.kind == 0
+    tri = pieces.nodes[straight]
     X = mesh.points[tri]
-    body = mesh.triangle_body()
+    body = pieces.body[straight].astype(int)
+    faces = face_intervals(mesh, pieces)
+    check_column_data(scene, faces)
     edges = mesh_edges(tri, mesh.points, mesh.n_nodes)
+    face_edge = edge_ids(edges, faces.left, faces.right, mesh.n_nodes)
     ng_local = edges["ng"][edges["id"]]  # (n_T, 3, 2)
-    basis = local_basis(X, ng_local)
-    cl = classify(mesh, edges, X, exact_field(scene))
+    cl = classify(mesh, edges, X, exact_field(scene), faces, face_edge)
+    basis = tie_basis(local_basis(X, ng_local), edges, face_edge[cl["tied"]])
     kind = cl["kind"]
     free = np.flatnonzero(kind == FREE)
-    n_c = len(mesh.pairs) - 1
+    n_c = len(cl["contact_x"])
     ycol = np.full(len(kind), -1)
     ycol[free] = np.arange(len(free))
     con = kind == CONTACT
@@ -304,10 +430,18 @@ def build_space(mesh: Mesh) -> EquilibriumSpace:
     F = np.array([b.body_force for b in scene.bodies])[body]
     div_rhs = -(h[:, None, None] * F[:, None, :]).repeat(3, axis=1).reshape(-1)
     contact_y = len(free) + np.arange(2 * n_c).reshape(n_c, 2)
-    space = EquilibriumSpace(mesh=mesh, X=X, body=body, basis=basis, edges=edges,
+    columns = np.flatnonzero(faces.column)
+    slab_iv = slab_interval(mesh, pieces, faces)
+    where = np.full(len(faces), -1)
+    where[columns] = np.arange(len(columns))
+    compliance = np.stack([b.material.compliance for b in scene.bodies])
+    space = EquilibriumSpace(mesh=mesh, pieces=pieces, triangulation=triangulation, tri=tri, X=X, body=body, basis=basis, edges=edges,
                              P=vertex_map(basis, edges, len(kind)), Tm=Tm, z_fix=z_fix, kind=kind,
                              div=div, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],
-                             traction_edges=cl["traction"], scales=Scales(1.0, 1.0, 1.0), load_imbalance=0.0)
+                             traction_edges=cl["traction"], faces=faces, face_edge=face_edge, columns=columns,
+                             column_dofs=cl["raw_n"][columns],
+                             column_energy_blocks=column_energy(pieces, faces, slab_iv, compliance)[columns],
+                             slab_column=where[slab_iv], scales=Scales(1.0, 1.0, 1.0), load_imbalance=0.0)
     z_fix, imbalance = balance_loads(space)
     space = replace(space, z_fix=z_fix, load_imbalance=imbalance)
     return replace(space, scales=make_scales(space))
@@ -359,7 +493,7 @@ def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.nd
     """For displacements ``r (n_nodes, 2, m)`` linear on each triangle: the boundary work
     ``int_bnd (sigma n).r ds`` as rows ``W (m, 27 n_T)`` on vertex values (exact: linear times
     linear), and the body-force work ``int F.r`` ``(m,)`` with its absolute size ``(m,)``."""
-    ed, tri = space.edges, space.mesh.triangles()
+    ed, tri = space.edges, space.tri
     b = ed["boundary"]
     t, j = ed["owner"][b, 0], ed["owner"][b, 1]
     n_out, _ = outward_normals(ed, space.X, space.mesh.points, b)

@@ -19,7 +19,7 @@ triangles and slabs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -60,6 +60,8 @@ class Slabs:
     hi: np.ndarray
     lo_arc: np.ndarray  # (m,) bool
     hi_arc: np.ndarray
+    # (m, 2) the nodes of the face edge whose V_h trace is extended along y over the slab (left, right)
+    edge_nodes: np.ndarray = field(default_factory=lambda: np.empty((0, 2), int))
 
     def __len__(self) -> int:
         return len(self.piece)
@@ -121,14 +123,17 @@ class Pieces:
                + rs[None, :, 1, None] * (v[:, None, 2, :] - v[:, None, 0, :]))
         P, W, ids = [pts.reshape(-1, 2)], [(J[:, None] * w[None, :]).ravel()], [np.repeat(self.tri_piece[tri], len(w))]
         if len(self.slabs):
-            sp, sw, si = self._slab_rule(n, only)
-            P.append(sp), W.append(sw), ids.append(si)
+            sel = None if only is None else only[self.slabs.piece]
+            sp, sw, si = self.slab_quadrature(n, sel)
+            P.append(sp), W.append(sw), ids.append(self.slabs.piece[si])
         return np.concatenate(P), np.concatenate(W), np.concatenate(ids)
 
-    def _slab_rule(self, n: int, only: np.ndarray | None = None):
+    def slab_quadrature(self, n: int = 4, only: np.ndarray | None = None):
+        """Points ``(m, 2)``, weights ``(m,)`` and slab index ``(m,)`` of a tensor Gauss rule with
+        ``n`` points per direction on every slab (``only``: a boolean mask over slabs)."""
         s = self.slabs
         u, wu = gauss01(n)
-        sel = np.arange(len(s)) if only is None else np.flatnonzero(only[s.piece])
+        sel = np.arange(len(s)) if only is None else np.flatnonzero(only)
         m = len(sel)
         idx = np.repeat(sel, n)
         x = s.xl[idx] + np.tile(u, m) * (s.xr - s.xl)[idx]
@@ -138,7 +143,12 @@ class Pieces:
         y = lo[:, None] + u[None, :] * (hi - lo)[:, None]
         w = (wx * (hi - lo))[:, None] * wu[None, :]
         pts = np.stack([np.repeat(x, n), y.ravel()], axis=1)
-        return pts, w.ravel(), np.repeat(s.piece[idx], n)
+        return pts, w.ravel(), np.repeat(idx, n)
+
+    def slab_areas(self) -> np.ndarray:
+        """``|S|`` of every slab, exactly (:func:`slab_bound_integral`)."""
+        s = self.slabs
+        return slab_bound_integral(s, self.faces, "hi") - slab_bound_integral(s, self.faces, "lo")
 
 
 def slab_bound(slabs: Slabs, faces, x, idx, which: str) -> np.ndarray:
@@ -191,8 +201,9 @@ def build_pieces(points, tris, tri_body, faces, keep=None, curved=None) -> Piece
         c = curved
         s = c["slabs"]
         n_c = len(c["kind"])
-        gl = Slabs(piece=s.piece + n_s, **{k: getattr(s, k) for k in
-                                          ("body", "xl", "xr", "lo", "hi", "lo_arc", "hi_arc")})
+        edge_nodes = np.asarray(c["nodes"])[s.piece[:, None], c["edge"]]
+        gl = Slabs(piece=s.piece + n_s, edge_nodes=edge_nodes, **{k: getattr(s, k) for k in
+                                                                 ("body", "xl", "xr", "lo", "hi", "lo_arc", "hi_arc")})
         a_s = slab_bound_integral(s, faces, "hi") - slab_bound_integral(s, faces, "lo")
         a_p = np.bincount(s.piece, weights=a_s, minlength=n_c)
         dx = c["edge_x"][:, 1] - c["edge_x"][:, 0]
@@ -228,6 +239,17 @@ def build_pieces(points, tris, tri_body, faces, keep=None, curved=None) -> Piece
     return Pieces(kind=np.concatenate(kinds), body=np.concatenate(bodies), nodes=np.concatenate(nodes),
                   B=np.concatenate(Bs), area=np.concatenate(areas), phi=np.concatenate(phis),
                   tri_vertices=xy, tri_piece=np.arange(n_s), slabs=slabs, faces=tuple(faces), tri_map=tri_map)
+
+
+def slab_outlines(pieces: Pieces, n: int = OUTLINE_POINTS) -> np.ndarray:
+    """``(n_slabs, n, 2)`` polygons of the slabs: ``n // 2`` points along the lower bound left to
+    right, then as many along the upper bound right to left (the arc followed where it bounds)."""
+    s = pieces.slabs
+    k = max(2, n // 2)
+    x = s.xl[:, None] + np.linspace(0.0, 1.0, k)[None, :] * (s.xr - s.xl)[:, None]
+    idx = np.broadcast_to(np.arange(len(s))[:, None], x.shape)
+    lo, hi = slab_bound(s, pieces.faces, x, idx, "lo"), slab_bound(s, pieces.faces, x, idx, "hi")
+    return np.concatenate([np.stack([x, lo], -1), np.stack([x, hi], -1)[:, ::-1]], axis=1)
 
 
 def piece_outlines(pieces: Pieces, n: int = OUTLINE_POINTS) -> list[tuple[np.ndarray, np.ndarray]]:

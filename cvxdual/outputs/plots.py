@@ -18,7 +18,7 @@ from matplotlib.colors import LogNorm, Normalize
 from matplotlib.path import Path
 from matplotlib.transforms import IdentityTransform
 
-from ..geometry.pieces import piece_outlines
+from ..geometry.pieces import piece_outlines, slab_outlines
 from ..reference.exact import exact_field
 
 SUPERSAMPLE = 3  # samples per pixel and direction when filling small pieces (see Triangles)
@@ -269,13 +269,34 @@ STRESS_COMPONENTS = {
 }
 
 
+def _column_strips(sol) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The slabs of the curved pieces of a solution with an equilibrium space cut into strips:
+    triangles ``(n, 3, 2)``, their slab, and the column stress ``(0, g(x), 0)`` at their vertices
+    ``(n, 3, 3)`` (``None`` for a P0 solution's bounds)."""
+    space = sol.space
+    strips = _strips(slab_outlines(space.pieces))  # (m, t, 3, 2)
+    slab = np.repeat(np.arange(len(strips)), strips.shape[1])
+    tris = strips.reshape(-1, 3, 2)
+    if sol.column_stress is None:  # a P0 solution's bounds: the geometry only
+        return tris, slab, None
+    col = space.slab_column[slab]
+    x0, x1 = (space.faces.x[space.columns[col], e][:, None] for e in (0, 1))
+    t = (tris[..., 0] - x0) / (x1 - x0)
+    g = sol.column_stress[col, 0][:, None] * (1 - t) + sol.column_stress[col, 1][:, None] * t
+    return tris, slab, np.stack([np.zeros_like(g), g, np.zeros_like(g)], -1)
+
+
 def _stress_field(sol, component: str) -> tuple[np.ndarray, np.ndarray]:
     """Triangles ``(n, 3, 2)`` covering the bodies and ``component`` on each: ``(n,)`` (P0) or
-    ``(n, 3)`` at the vertices (``eq``: linear on every sub-triangle)."""
+    ``(n, 3)`` at the vertices (``eq``: linear on every sub-triangle and column strip)."""
     fn = STRESS_COMPONENTS[component][0]
     if sol.stress_space == "eq":
         P = sol.space.sub_points()
-        return P, fn(sol.stress.reshape(-1, 3)).reshape(len(P), 3)
+        values = fn(sol.stress.reshape(-1, 3)).reshape(len(P), 3)
+        if not len(sol.space.pieces.slabs):
+            return P, values
+        tris, _, col = _column_strips(sol)
+        return np.concatenate([P, tris]), np.concatenate([values, fn(col.reshape(-1, 3)).reshape(len(tris), 3)])
     tris, ids = _triangles(sol.pieces)
     return tris, fn(sol.stress)[ids]
 
@@ -487,6 +508,10 @@ def plot_bound_map(sol, ax=None, colorbar: bool = True, cax=None):
     d = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     area = 0.5 * np.abs(d[0][:, 0] * d[1][:, 1] - d[0][:, 1] * d[1][:, 0])
     dens = b["contributions"]["sub"].ravel() / area
+    if len(sol.space.pieces.slabs):  # the columns: each slab's share over its area
+        tris, slab, _ = _column_strips(sol)
+        P = np.concatenate([P, tris])
+        dens = np.concatenate([dens, (b["contributions"]["column"] / sol.space.pieces.slab_areas())[slab]])
     floor = max(float(dens.max()) * 1e-8, 1e-300)
     pc = ax.add_collection(Triangles(P, array=np.maximum(dens, floor), cmap="inferno",
                                      norm=LogNorm(floor, max(float(dens.max()), 10 * floor))), autolim=False)

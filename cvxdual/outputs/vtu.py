@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.locate import nearest_node_values
-from ..geometry.pieces import piece_outlines
+from ..geometry.pieces import piece_outlines, slab_outlines
 from ..voigt import body_factors, shear_stress, von_mises
 
 # uncompressed: zlib makes it 2.1x smaller at 7x the write time (hertz level 6, 5.9e5 pieces:
@@ -143,6 +143,8 @@ def _lower_face_stress(P: np.ndarray, s: np.ndarray, lower: int, cell_body: np.n
     on = (np.abs(P[a, 1] - face.value(P[a, 0])) <= tol) & (np.abs(P[b, 1] - face.value(P[b, 0])) <= tol)
     a, b = a[on], b[on]
     a, b = np.where(P[a, 0] <= P[b, 0], a, b), np.where(P[a, 0] <= P[b, 0], b, a)
+    if not len(a):  # a curved face: the column stresses give its trace (see _write_eq_vtu)
+        return np.zeros((len(xe), 3))
     order = np.argsort(P[a, 0], kind="stable")
     a, b = a[order], b[order]
     k = np.clip(np.searchsorted(P[a, 0], xe, side="right") - 1, 0, len(a) - 1)
@@ -159,11 +161,52 @@ def _eq_cells(space, sigma: np.ndarray) -> dict:
             "cell_triangle": np.repeat(np.arange(space.n_tri), 3)}
 
 
+def column_stress_at(space, g: np.ndarray, body: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The column field's vertical stress at abscissae ``x`` of ``body``'s face, and which ``x``
+    lie under a column (elsewhere the value is 0)."""
+    faces = space.faces
+    cols = space.columns[faces.body[space.columns] == body]
+    g_b = g[faces.body[space.columns] == body]
+    if not len(cols):
+        return np.zeros(len(x)), np.zeros(len(x), bool)
+    x0, x1 = faces.x[cols, 0], faces.x[cols, 1]
+    i = np.clip(np.searchsorted(x0, x, side="right") - 1, 0, len(cols) - 1)
+    inside = (x >= x0[i]) & (x <= x1[i])
+    t = (x - x0[i]) / (x1[i] - x0[i])
+    return np.where(inside, g_b[i, 0] * (1 - t) + g_b[i, 1] * t, 0.0), inside
+
+
+def _column_cells(sol) -> dict:
+    """The columns of the curved pieces: every slab a ``polygon`` cell with its own points, the
+    stress ``(0, g(x), 0)`` at them (linear in x, constant in y), the displacement of ``V_h`` (its
+    face edge's value extended along y), the slab's piece kind and body."""
+    space = sol.space
+    pieces = space.pieces
+    s = pieces.slabs
+    poly = slab_outlines(pieces)
+    m, k = poly.shape[:2]
+    g = sol.column_stress
+    col = space.slab_column
+    x0, x1 = (space.faces.x[space.columns[col], e][:, None] for e in (0, 1))
+    t = (poly[..., 0] - x0) / (x1 - x0)
+    gx = g[col, 0][:, None] * (1 - t) + g[col, 1][:, None] * t
+    stress = np.stack([np.zeros_like(gx), gx, np.zeros_like(gx)], -1)
+    a, b = s.edge_nodes.T
+    xa, xb = sol.mesh.points[a, 0][:, None], sol.mesh.points[b, 0][:, None]
+    te = ((poly[..., 0] - xa) / (xb - xa))[..., None]
+    v = sol.displacement
+    disp = v[a][:, None, :] * (1 - te) + v[b][:, None, :] * te
+    return {"points": poly.reshape(-1, 2), "cells": np.arange(m * k).reshape(m, k),
+            "point_stress": stress.reshape(-1, 3), "displacement": disp.reshape(-1, 2),
+            "cell_body": s.body.astype(np.int32), "cell_kind": pieces.kind[s.piece].astype(np.int32)}
+
+
 def _write_eq_vtu(sol, path) -> None:
     """Equilibrium stresses: every sub-triangle a cell with its own vertices (discontinuous),
-    point data the linear stresses, so equilibrium can be checked from the file alone."""
+    then every slab of the curved pieces a polygon cell with its column stress, point data the
+    stresses (linear on each cell), so admissibility can be checked from the file alone."""
     c = _eq_cells(sol.space, sol.stress)
-    tri = sol.mesh.triangles()
+    tri = sol.space.tri
     v = sol.displacement
     # the P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid), in cell order
     corner = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(v[tri].mean(axis=1)[:, None],
@@ -171,18 +214,32 @@ def _write_eq_vtu(sol, path) -> None:
     lines = contact_lines(sol)
     cb = c["cell_body"]
     face = sol.scene.bodies[lines["body"]].face
+    xe = lines["points"][:, 0]
     # face points are computed coordinates (rounding only); other vertices are a layer away
-    s_line = _lower_face_stress(c["points"], c["point_stress"], lines["body"], cb, face, lines["points"][:, 0],
+    s_line = _lower_face_stress(c["points"], c["point_stress"], lines["body"], cb, face, xe,
                                 1e-9 * sol.scene.length_scale)
-    s = np.concatenate([c["point_stress"], s_line])
-    pbody = np.concatenate([np.repeat(cb, 3), np.full(len(s_line), lines["body"])])
-    # point data on the cells' points and then the line points (the order _write puts them in)
-    point = {k: np.ascontiguousarray(val)
-             for k, val in {**stress_measures(s, body_factors(sol.scene)[pbody]), "stress": s}.items()}
+    gx, under = column_stress_at(sol.space, sol.column_stress, lines["body"], xe)
+    s_line[under] = np.stack([np.zeros(int(under.sum())), gx[under], np.zeros(int(under.sum()))], 1)
+    blocks = [("triangle", c["cells"])]
+    points, disp, s, pbody = [c["points"]], [corner.reshape(-1, 2)], [c["point_stress"]], [np.repeat(cb, 3)]
     cell = {"piece_kind": [np.zeros(len(cb), np.int32)], "body": [cb.astype(np.int32)]}
     if sol.bounds is not None:
         cell["bound_contribution"] = [sol.bounds["contributions"]["sub"].ravel()]
-    _write(path, c["points"], corner.reshape(-1, 2), point, [("triangle", c["cells"])], cell, lines)
+    if len(sol.space.pieces.slabs):
+        col = _column_cells(sol)
+        k = col["cells"].shape[1]
+        blocks.append(("polygon", len(c["points"]) + col["cells"]))
+        points.append(col["points"]), disp.append(col["displacement"]), s.append(col["point_stress"])
+        pbody.append(np.repeat(col["cell_body"], k))
+        cell["piece_kind"].append(col["cell_kind"]), cell["body"].append(col["cell_body"])
+        if sol.bounds is not None:
+            cell["bound_contribution"].append(sol.bounds["contributions"]["column"])
+    s = np.concatenate([*s, s_line])
+    pbody = np.concatenate([*pbody, np.full(len(s_line), lines["body"])])
+    # point data on the cells' points and then the line points (the order _write puts them in)
+    point = {k: np.ascontiguousarray(val)
+             for k, val in {**stress_measures(s, body_factors(sol.scene)[pbody]), "stress": s}.items()}
+    _write(path, np.concatenate(points), np.concatenate(disp), point, blocks, cell, lines)
 
 
 def write_vtu(sol, path: str | Path) -> None:
@@ -213,8 +270,10 @@ def write_vtu(sol, path: str | Path) -> None:
     body = take(p.body).astype(np.int32)
     per = {**stress_measures(stress, body_factors(sol.scene)[body]), "stress": stress, "body": body,
            "piece_kind": take(p.kind).astype(np.int32)}
-    if sol.bounds is not None:  # flat faces only: the pieces are the mesh triangles, in order
-        per["bound_contribution"] = take(sol.bounds["contributions"]["element"])
+    if sol.bounds is not None:  # the straight pieces are the macro triangles, in order; curved ones sum their slabs
+        c = sol.bounds["contributions"]
+        curved = np.bincount(p.slabs.piece, weights=c["column"], minlength=len(p))[len(c["element"]):]
+        per["bound_contribution"] = take(np.concatenate([c["element"], curved]))
     split = np.cumsum([len(i) for i in ids])[:-1]
     cell = {k: np.split(np.ascontiguousarray(v), split) for k, v in per.items()}
     _write(path, np.concatenate(points), np.concatenate(pdisp), {}, blocks, cell, contact_lines(sol))

@@ -1,7 +1,8 @@
 """Curves ``y = f(x)``: contact arcs of the bodies and gap profiles.
 
 A closed set of kinds, each a frozen dataclass that knows its value, slope, curvature, exact
-integral and inflexion points, all vectorised over ``x``. Scene files name a kind and give its
+integral, inflexion points and guaranteed bounds of its curvature on intervals, all vectorised
+over ``x``. Scene files name a kind and give its
 numbers; nothing is ever evaluated from a string.
 
 =============  ==========================================================================
@@ -46,6 +47,12 @@ class Profile:
         """Second derivative ``f''(x)``."""
         raise NotImplementedError
 
+    def curvature_range(self, x0, x1) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds ``(lo, hi)`` with ``lo <= f''(x) <= hi`` for every ``x`` in ``[x0, x1]``
+        (arrays of intervals): guaranteed, from the closed form of ``f''`` (each kind knows where
+        its curvature is extreme), not from samples. The certified bounds rest on them."""
+        raise NotImplementedError
+
     def antiderivative(self, x):
         """Some ``F`` with ``F' = f`` (exact, used for areas)."""
         raise NotImplementedError
@@ -85,6 +92,10 @@ class Flat(Profile):
     def curvature(self, x):
         return np.zeros(np.shape(x))
 
+    def curvature_range(self, x0, x1):
+        z = np.zeros(np.broadcast(np.asarray(x0), np.asarray(x1)).shape)
+        return z, z.copy()
+
     def antiderivative(self, x):
         return self.y0 * np.asarray(x, float)
 
@@ -113,6 +124,10 @@ class Parabola(Profile):
 
     def curvature(self, x):
         return np.full(np.shape(x), 1.0 / self.R)
+
+    def curvature_range(self, x0, x1):
+        k = np.full(np.broadcast(np.asarray(x0), np.asarray(x1)).shape, 1.0 / self.R)
+        return k, k.copy()
 
     def antiderivative(self, x):
         u = np.asarray(x, float) - self.xc
@@ -151,6 +166,15 @@ class Circle(Profile):
     def curvature(self, x):
         _, w = self._root(x)
         return -self._s * self.R**2 / w**3
+
+    def curvature_range(self, x0, x1):
+        # |f''| = R^2 / (R^2 - u^2)^(3/2) grows with |u| = |x - xc|: extreme at the interval's
+        # points nearest to and farthest from xc
+        u0, u1 = np.asarray(x0, float) - self.xc, np.asarray(x1, float) - self.xc
+        near = np.where((u0 <= 0) & (u1 >= 0), 0.0, np.minimum(np.abs(u0), np.abs(u1)))
+        far = np.maximum(np.abs(u0), np.abs(u1))
+        small, large = (self.R**2 / np.maximum(self.R**2 - u * u, 0.0) ** 1.5 for u in (near, far))
+        return (small, large) if self.branch == "lower" else (-large, -small)
 
     def antiderivative(self, x):
         u, w = self._root(x)
@@ -199,6 +223,17 @@ class Cosine(Profile):
 
     def curvature(self, x):
         return -self.amplitude * self._k**2 * np.cos(self._k * (np.asarray(x, float) - self.x0))
+
+    def curvature_range(self, x0, x1):
+        # cos(theta) over [t0, t1]: 1 where the interval holds a multiple of 2 pi, -1 where it
+        # holds an odd multiple of pi, else the larger (smaller) end value
+        t0, t1 = (self._k * (np.asarray(x, float) - self.x0) for x in (x0, x1))
+        c0, c1 = np.cos(t0), np.cos(t1)
+        turn = 2 * np.pi
+        top = np.where(np.ceil(t0 / turn) <= np.floor(t1 / turn), 1.0, np.maximum(c0, c1))
+        bottom = np.where(np.ceil((t0 - np.pi) / turn) <= np.floor((t1 - np.pi) / turn), -1.0, np.minimum(c0, c1))
+        a = -self.amplitude * self._k**2  # f'' = a cos(theta)
+        return np.minimum(a * top, a * bottom), np.maximum(a * top, a * bottom)
 
     def antiderivative(self, x):
         x = np.asarray(x, float)

@@ -1,0 +1,185 @@
+"""Stress fields of either stress space as functions on the bodies, and distances between fields
+on different meshes of one scene (a solution against a finer reference).
+
+A :class:`StressField` is piecewise constant on the pieces (``p0``; or on the slabs of the
+curved pieces, as ``C e(v)`` of a displacement of ``V_h``: :meth:`StressField.kinematic`) or the
+equilibrium field (``eq``: linear on every sub-triangle of the straight pieces, the column stress
+``(0, g(x), 0)`` on the curved ones). :meth:`StressField.at` evaluates it at points; :meth:`StressField.rule`
+gives a quadrature of it; :func:`field_distance` integrates the difference of two fields over
+the first one's cells, every point located in the second's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CvxdualError
+from ..geometry.locate import locate
+from ..geometry.quadrature import triangle_rule
+from ..voigt import VOIGT_WEIGHT
+from .element import bary_gradients, sub_vertices
+
+
+@dataclass(frozen=True)
+class StressField:
+    """The stress of a solution: ``stress`` per piece ``(n_pieces, 3)`` (``space`` None; with
+    ``slab`` ``(n_slabs, 3)`` the curved pieces are constant per slab instead), or the vertex values
+    ``(n_sub, 3, 3)`` and column values ``column`` ``(n_col, 2)`` of ``space``."""
+
+    scene: object
+    mesh: object
+    pieces: object
+    stress: np.ndarray
+    space: object | None = None
+    column: np.ndarray | None = None
+    slab: np.ndarray | None = None
+
+    @classmethod
+    def kinematic(cls, space, v: np.ndarray) -> StressField:
+        """``C e(v)`` of a displacement ``v (n_nodes, 2)`` of ``V_h``: constant on every straight
+        triangle and on every slab of the curved pieces (its strain along the slab's face edge)."""
+        from .bounds import slab_strains, strains
+        stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+        pieces = space.pieces
+        per_piece = np.zeros((len(pieces), 3))
+        per_piece[:space.n_tri] = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
+        slab = np.einsum("sij,sj->si", stiff[pieces.slabs.body], slab_strains(space, v))
+        return cls(space.scene, space.mesh, pieces, per_piece, slab=slab)
+
+    @classmethod
+    def of(cls, sol) -> StressField:
+        """The field of a :class:`~cvxdual.solution.Solution`."""
+        if sol.stress_space == "eq":
+            return cls(sol.scene, sol.mesh, sol.pieces, np.asarray(sol.stress, float), sol.space,
+                       np.asarray(sol.column_stress, float))
+        return cls(sol.scene, sol.mesh, sol.pieces, np.asarray(sol.stress, float))
+
+    def at(self, pts: np.ndarray, body: np.ndarray, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Voigt stresses ``(m, 3)`` at points ``pts`` of the bodies ``body``, and the cell each lies
+        in (a piece, or for ``eq`` a sub-triangle ``3 t + i`` or ``-1 - slab`` on a curved piece):
+        a point on a cell boundary takes one side. Points outside every piece are refused."""
+        loc = locate(self.mesh, self.pieces, pts, body, tol)
+        if np.any(loc < 0):
+            raise CvxdualError(f"{int(np.sum(loc < 0))} points lie outside the pieces of the field: the fields are "
+                               "not of the same scene")
+        if self.space is None:
+            out = self.stress[loc]
+            curved = np.flatnonzero(self.pieces.kind[loc] > 0) if self.slab is not None else []
+            if len(curved):
+                slab = slab_of(self.pieces, loc[curved], pts[curved])
+                out[curved] = self.slab[slab]
+                loc = loc.copy()
+                loc[curved] = -1 - slab
+            return out, loc
+        sp = self.space
+        n_straight = sp.n_tri  # the straight pieces come first, in the order of the macro triangles
+        out, cell = np.empty((len(pts), 3)), np.empty(len(pts), int)
+        st = np.flatnonzero(loc < n_straight)
+        if len(st):
+            t = loc[st]
+            V = sub_vertices(sp.X[t])  # (m, 3, 3, 2): the three sub-triangles (X_i, X_i+1, c)
+            # the sub-triangle holding the point: the largest of its barycentric coordinate at c
+            lam = np.einsum("msaj,mj->msa", bary_gradients(V)[0], pts[st]) + _offsets(V)
+            i = np.argmax(lam[:, :, 2] + 1e9 * (lam.min(2) >= -1e-12), axis=1)
+            li = lam[np.arange(len(st)), i]  # (m, 3) barycentric in its sub-triangle
+            vals = self.stress.reshape(sp.n_tri, 3, 3, 3)[t, i]  # (m, 3 vertices, 3)
+            out[st] = np.einsum("ma,mai->mi", li, vals)
+            cell[st] = 3 * t + i
+        cu = np.flatnonzero(loc >= n_straight)
+        if len(cu):
+            g, slab = column_at(sp, self.column, loc[cu], pts[cu])
+            out[cu] = np.stack([np.zeros(len(cu)), g, np.zeros(len(cu))], 1)
+            cell[cu] = -1 - slab
+        return out, cell
+
+    def rule(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A quadrature of the field: points, weights, body, values ``(m, 3)`` and cell (as
+        :meth:`at`), with ``n*n`` Gauss points per piece (``p0``) or per sub-triangle and slab (``eq``)."""
+        if self.space is None:
+            if self.slab is None:
+                pts, w, idx = self.pieces.quadrature(n)
+                return pts, w, self.pieces.body[idx].astype(int), self.stress[idx], idx
+            pts, w, idx = self.pieces.quadrature(n, only=self.pieces.kind == 0)
+            spt, sw, si = self.pieces.slab_quadrature(n)
+            return (np.concatenate([pts, spt]), np.concatenate([w, sw]),
+                    np.concatenate([self.pieces.body[idx], self.pieces.slabs.body[si]]).astype(int),
+                    np.concatenate([self.stress[idx], self.slab[si]]), np.concatenate([idx, -1 - si]))
+        sp = self.space
+        rs, wr = triangle_rule(n)
+        lam = np.stack([1 - rs.sum(1), rs[:, 0], rs[:, 1]], 1)
+        P = sp.sub_points()
+        _, area = bary_gradients(P)
+        pts = np.einsum("qa,sai->sqi", lam, P).reshape(-1, 2)
+        w = (2.0 * area[:, None] * wr[None, :]).ravel()
+        vals = np.einsum("qa,sai->sqi", lam, self.stress.reshape(-1, 3, 3)).reshape(-1, 3)
+        cell = np.repeat(np.arange(len(P)), len(wr))
+        body = np.repeat(np.repeat(sp.body, 3), len(wr))
+        if len(sp.pieces.slabs):
+            spt, sw, si = sp.pieces.slab_quadrature(n)
+            g, _ = column_at(sp, self.column, None, spt, si)
+            pts, w = np.concatenate([pts, spt]), np.concatenate([w, sw])
+            vals = np.concatenate([vals, np.stack([np.zeros(len(g)), g, np.zeros(len(g))], 1)])
+            cell = np.concatenate([cell, -1 - si])
+            body = np.concatenate([body, sp.pieces.slabs.body[si].astype(int)])
+        return pts, w, body, vals, cell
+
+
+def _offsets(V: np.ndarray) -> np.ndarray:
+    """The constant terms of the barycentric functions of triangles ``V (..., 3, 2)``."""
+    g, _ = bary_gradients(V)
+    return 1.0 / 3.0 - np.einsum("...aj,...j->...a", g, V.mean(-2))
+
+
+def slab_of(pieces, piece: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """The slab of each point ``pts`` of the curved pieces ``piece``: the one whose x range holds it
+    (a type-2 piece has two, side by side)."""
+    s = pieces.slabs
+    order = np.lexsort((s.xl, s.piece))
+    first = np.searchsorted(s.piece[order], piece)
+    second = np.minimum(first + 1, len(order) - 1)
+    use_second = (s.piece[order[second]] == piece) & (pts[:, 0] >= s.xl[order[second]])
+    return order[np.where(use_second, second, first)]
+
+
+def column_at(space, g: np.ndarray, piece: np.ndarray | None, pts: np.ndarray,
+              slab: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The column stress ``g(x)`` at points ``pts`` of the curved pieces ``piece`` (or of the slabs
+    ``slab``, when known), and the slab of each point."""
+    if slab is None:
+        slab = slab_of(space.pieces, piece, pts)
+    col = space.slab_column[slab]
+    x0, x1 = space.faces.x[space.columns[col], 0], space.faces.x[space.columns[col], 1]
+    t = (pts[:, 0] - x0) / (x1 - x0)
+    return g[col, 0] * (1 - t) + g[col, 1] * t, slab
+
+
+def field_distance(a: StressField, b: StressField, n: int = 3, n_fine: int | None = 8) -> dict:
+    """``||sigma_a - sigma_b||`` (L2 and energy) integrated over ``a``'s cells (``n*n`` points each),
+    every point evaluated in ``b``; relative measures are against ``a`` (integrate over the finer
+    field). A cell of ``a`` whose points fall in several cells of ``b`` (the meshes are not nested:
+    the integrand jumps inside it) is integrated again with ``n_fine*n_fine`` points."""
+    tol = 1e-10 * a.scene.length_scale  # Gauss points are interior; rounding where the faces coincide
+    pts, w, body, va, cell = a.rule(n)
+    vb, cb = b.at(pts, body, tol)
+    if n_fine is not None:
+        cells, first, inv = np.unique(cell, return_index=True, return_inverse=True)
+        straddles = np.zeros(len(cells), bool)
+        np.logical_or.at(straddles, inv, cb != cb[first][inv])  # a point in another host than the first
+        bad = cells[straddles]
+        if len(bad):
+            fp, fw, fb, fv, fc = a.rule(n_fine)
+            keep_f = np.isin(fc, bad)
+            keep = ~np.isin(cell, bad)
+            fvb, _ = b.at(fp[keep_f], fb[keep_f], tol)
+            w, body, va, vb = (np.concatenate([x[keep], y]) for x, y in
+                               ((w, fw[keep_f]), (body, fb[keep_f]), (va, fv[keep_f]), (vb, fvb)))
+    A = np.stack([bd.material.compliance for bd in a.scene.bodies])[body]
+    d = va - vb
+    l2 = np.sqrt(np.sum(w * np.einsum("mi,mi,i->m", d, d, VOIGT_WEIGHT)))
+    ref = np.sqrt(np.sum(w * np.einsum("mi,mi,i->m", va, va, VOIGT_WEIGHT)))
+    en = np.sqrt(np.sum(w * np.einsum("mi,mij,mj->m", d, A, d)))
+    ref_en = np.sqrt(np.sum(w * np.einsum("mi,mij,mj->m", va, A, va)))
+    return {"l2": float(l2), "l2_rel": float(l2 / ref) if ref > 0 else float("nan"), "energy": float(en),
+            "energy_rel": float(en / ref_en) if ref_en > 0 else float("nan")}
