@@ -93,16 +93,34 @@ def divergence_rows(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return full.reshape(len(X), 6, 27), area, h
 
 
+# a fixed generic 27 x 3 frame whose projection onto each triangle's 3-dimensional null space
+# gives its bubbles (any fixed choice in general position does; this one is deterministic)
+_BUBBLE_SEED = np.linalg.qr(np.random.default_rng(20261202).standard_normal((27, 3)))[0]
+
+
 def local_basis(X: np.ndarray, ng: np.ndarray) -> np.ndarray:
     """``(n_T, 27, 15)``: vertex values of the 12 edge-dof basis stresses (columns 0-11, dual to
     :func:`edge_dof_rows` and free of internal jumps) and of 3 bubbles (zero internal jumps and
-    zero edge dofs). One batched SVD of the stacked ``(24, 27)`` conditions; it must have full
-    rank 24 (then the local space has exactly 15 = 27 - 12 dimensions)."""
+    zero edge dofs). The stacked ``(24, 27)`` conditions ``M`` must have full rank 24 (then the
+    local space has exactly 15 = 27 - 12 dimensions). The edge stresses are the least-norm
+    solutions of ``M N = [0; I]``, ``N = M^T (M M^T)^-1 [0; I]``, and the bubbles an orthonormal
+    basis of the null space of ``M``, the projection ``(I - M^T (M M^T)^-1 M) E`` of a fixed frame
+    ``E``: a batched 24 x 24 inverse and 27 x 3 QR factorisations. A batched SVD costs six times
+    more; it serves only a triangle whose null space the frame meets at a small angle."""
     M = np.concatenate([internal_rows(X), edge_dof_rows(ng)], axis=1)
-    U, s, Vt = np.linalg.svd(M)
-    if np.any(s[:, -1] < 1e-10 * s[:, 0]):
-        raise MeshError("a macro triangle gives a singular Johnson-Mercier basis (degenerate triangle)")
-    pinv = np.einsum("tki,tk,tjk->tij", Vt[:, :24], 1.0 / s, U)  # (n_T, 27, 24)
-    N = np.concatenate([pinv[:, :, 12:], Vt[:, 24:].transpose(0, 2, 1)], axis=2)
+    MT = M.transpose(0, 2, 1)
+    try:
+        Gi = np.linalg.inv(M @ MT)  # one batched inverse serves the three products below
+    except np.linalg.LinAlgError:
+        raise MeshError("a macro triangle gives a singular Johnson-Mercier basis (degenerate triangle)") from None
+    pinv = MT @ Gi  # (n_T, 27, 24)
+    bubble, R = np.linalg.qr(_BUBBLE_SEED[None] - pinv @ (M @ _BUBBLE_SEED))
+    bad = np.abs(np.diagonal(R, axis1=1, axis2=2)).min(1) < 1e-3  # the frame meets this null space badly
+    if bad.any():  # rare: take those null spaces from an SVD instead
+        bubble[bad] = np.linalg.svd(M[bad])[2][:, 24:].transpose(0, 2, 1)
+    N = np.concatenate([pinv[:, :, 12:], bubble], axis=2)
     target = np.concatenate([np.zeros((12, 15)), np.eye(12, 15)])
-    return N + pinv @ (target[None] - M @ N)  # one step of refinement: conditions hold to ~1e-16
+    N = N + pinv @ (target[None] - M @ N)  # one step of refinement: conditions to ~1e-16
+    if not np.all(np.abs(M @ N - target[None]) < 1e-10):
+        raise MeshError("a macro triangle gives a singular Johnson-Mercier basis (degenerate triangle)")
+    return N
