@@ -70,6 +70,7 @@ class SolverStats(Mapping):
     warm_start_time: float | None = None
     active: np.ndarray | None = None  # the final active set (pairs; eq: contact parameters (n_c, 2))
     # -- the equilibrium space (cvxdual.eq) --
+    corrections: int | None = None  # correction solves of the fast path's equilibrium residual
     post_time: float | None = None  # the exactness step
     contact_change: float | None = None  # its largest relative change of a contact traction
     projection_iterations: int | None = None
@@ -78,7 +79,7 @@ class SolverStats(Mapping):
     n_equalities: int | None = None
     n_inequalities: int | None = None
     objective: float | None = None  # the model's objective at the exact field
-    multipliers: dict | None = None  # nondimensional: "divergence" (n_T, 6), "opening" (n_c, 2)
+    multipliers: dict | None = None  # nondimensional: "opening" (n_c, 2) (eq fast path)
     pinned: np.ndarray | None = None  # multipliers pinned against floating motions
     n_mu: int | None = None  # size of the condensed system
     nnz: int | None = None

@@ -17,7 +17,16 @@ from cvxdual.eq.bounds import (
     contact_slack,
     exact_errors,
 )
-from cvxdual.eq.element import divergence_rows, edge_dof_rows, internal_rows, local_basis
+from cvxdual.eq.element import (
+    divergence_rows,
+    edge_blocks,
+    edge_dof_rows,
+    internal_rows,
+    inverse2,
+    least_norm_basis,
+    local_basis,
+    piola,
+)
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_motions
 from cvxdual.geometry.boundary import supported
@@ -57,13 +66,20 @@ def test_local_counts_and_basis_exact():
     s_int = np.linalg.svd(internal_rows(X), compute_uv=False)
     # rank decisions: the smallest kept singular value is >1e-3 of the largest, dropped ones are 0
     assert np.all(s_int[:, -1] > 1e-3 * s_int[:, 0])  # 12 independent internal conditions
-    N = local_basis(X, ng)
+    Q = piola(X)
+    N = local_basis(Q, inverse2(edge_blocks(Q, ng)))  # the reference basis, mapped (no ties)
     assert N.shape == (space.n_tri, 27, 15)
     assert np.abs(internal_rows(X) @ N).max() < 1e-13  # no internal jump: rounding only
     D = edge_dof_rows(ng) @ N
     assert np.abs(D - np.eye(12, 15)[None]).max() < 1e-13  # dual to the edge dofs, bubbles carry none
     s_div = np.linalg.svd(divergence_rows(X)[0] @ N, compute_uv=False)
     assert np.all(s_div[:, -1] > 1e-3 * s_div[:, 0])  # div onto R^6 on every triangle
+    # the same space as the one solved for directly (SVD of the 24 conditions, triangle by
+    # triangle): the edge columns differ by bubbles only, the bubbles span the same space
+    N0 = least_norm_basis(X, ng)
+    bub = N0[:, :, 12:]
+    coef = np.linalg.solve(bub.transpose(0, 2, 1) @ bub, bub.transpose(0, 2, 1) @ (N - N0))
+    assert np.abs(bub @ coef - (N - N0)).max() < 1e-12 * np.abs(N).max()  # rounding of O(1) values
 
 
 @pytest.mark.parametrize("scene,tri,floating", [("patch", "type1", 0), ("hertz", "type1", 1), ("blocks", "type1", 0),

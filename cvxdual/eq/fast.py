@@ -34,40 +34,56 @@ from ..errors import SolverError
 from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
-from .element import MASS0, bary_gradients, divergence_rows, sub_vertices
-from .space import EquilibriumSpace, make_exact, rigid_motions
+from .element import (
+    MASS0,
+    REF_DIV_PINV,
+    REF_DIVFREE,
+    REF_ENERGY_DIVFREE,
+    REF_ENERGY_MIXED,
+    SYM_PAIRS,
+    bary_gradients,
+    divergence_rows,
+    divergence_to_reference,
+    inverse2,
+    sub_vertices,
+)
+from .space import PROJECT_TOL, EquilibriumSpace, make_exact, rigid_motions
 
 CHUNK = 16384  # triangles per batched local inversion: bounds the temporaries (21 x 21 each)
 SET_TOL = 1e-10  # relative size of p or nu below which the contact state is left as it is (rounding)
 RESIDUAL_TOL = 1e-8  # relative residual of the condensed solve above which it is not trusted
-REFINE_STEPS, REFINE_TOL = 3, 1e-15  # iterative refinement of the condensed solve, until rounding
+REFINE_STEPS, REFINE_TOL = 1, 1e-15  # iterative refinement of the condensed solve, until rounding
+# correction solves of the final field's equilibrium residual, until it is below the exactness
+# step's threshold (eq.space.PROJECT_TOL; one solve takes 1e-10 to ~5e-14 at levels 3-5) or stalls
+CORRECTIONS = 3
 
 
-def triangle_dofs(space: EquilibriumSpace) -> np.ndarray:
-    """``(n_T, 15)``: the raw parameter of each local basis column (as in ``vertex_map``)."""
-    ed, n_T = space.edges, space.n_tri
-    e = np.arange(2)[None, None, :, None] ^ ed["flip"][:, :, None, None]  # global end of each local end
-    edof = 4 * ed["id"][:, :, None, None] + 2 * e + np.arange(2)[None, None, None, :]
-    bubbles = 4 * len(ed["keys"]) + 3 * np.arange(n_T)[:, None] + np.arange(3)[None, :]
-    return np.concatenate([edof.reshape(n_T, 12), bubbles], axis=1)
+def symmetric_product(L: sp.spmatrix, x: np.ndarray) -> np.ndarray:
+    """``S x`` for the symmetric ``S`` whose lower triangle is ``L``."""
+    return L @ x + L.T @ x - L.diagonal() * x
 
 
-def local_blocks(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
-    """Energy ``H (n_T, 15, 15)`` (``1/2 z.H z = 1/2 int sigma:A sigma``, exact P1 mass per
-    sub-triangle) and divergence rows ``B (n_T, 6, 15)`` in the local parameters, physical units.
-    A column's energy goes to the triangle of its face edge, whose tied normal slots hold its
-    ``g`` (:func:`cvxdual.eq.space.tie_basis`): each column then belongs to one triangle."""
-    n_T = space.n_tri
-    _, area = bary_gradients(sub_vertices(space.X))
-    A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body]
-    K9 = (MASS0[None, :, None, :, None] * A[:, None, :, None, :]).reshape(n_T, 9, 9)
-    H = np.zeros((n_T, 15, 15))
-    for i in range(3):  # three sub-triangles; vectorised over the mesh
-        Ni = space.basis[:, 9 * i: 9 * i + 9, :]
+def local_blocks(space: EquilibriumSpace, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Energy ``H (n, 15, 15)`` (``1/2 z.H z = 1/2 int sigma:A sigma``, exact P1 mass per
+    sub-triangle) and divergence rows ``B (n, 6, 15)`` in the local parameters of the (sorted)
+    triangles ``tri``, physical units. A column's energy goes to the triangle of its face edge,
+    whose tied normal slots hold its ``g`` (:func:`cvxdual.eq.space.tie_blocks`): each column then
+    belongs to one triangle."""
+    n = len(tri)
+    N = space.local_basis(tri)
+    _, area = bary_gradients(sub_vertices(space.X[tri]))
+    A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body[tri]]
+    K9 = (MASS0[None, :, None, :, None] * A[:, None, :, None, :]).reshape(n, 9, 9)
+    H = np.zeros((n, 15, 15))
+    for i in range(3):  # three sub-triangles; vectorised over the triangles
+        Ni = N[:, 9 * i: 9 * i + 9, :]
         H += area[:, i, None, None] * (Ni.transpose(0, 2, 1) @ (K9 @ Ni))
     t, slots = column_slots(space)
-    np.add.at(H, (t[:, None, None], slots[:, :, None], slots[:, None, :]), space.column_energy_blocks)
-    return H, divergence_rows(space.X)[0] @ space.basis
+    pos = np.searchsorted(tri, t)
+    mine = (pos < n) & (tri[np.minimum(pos, n - 1)] == t) if n else np.zeros(len(t), bool)
+    np.add.at(H, (pos[mine, None, None], slots[mine, :, None], slots[mine, None, :]),
+              space.column_energy_blocks[mine])
+    return H, divergence_rows(space.X[tri])[0] @ N
 
 
 def column_slots(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +144,8 @@ def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray
 class HybridSolver:
     """The linear algebra of the active-set method (:mod:`cvxdual.fast.core`) on the equilibrium
     dual of one :class:`EquilibriumSpace`, in the nondimensional variables of
-    :class:`~cvxdual.eq.model.EquilibriumModel`."""
+    :class:`~cvxdual.eq.model.EquilibriumModel`. It keeps the factor of the last contact set
+    (:meth:`finish` reuses it, then :meth:`close` frees it)."""
 
     what = "eq fast path"
     advice = ("use the CVXPY path (EquilibriumModel, or solver='CLARABEL')",
@@ -139,14 +156,12 @@ class HybridSolver:
         self.space = space
         sc = space.scales
         n_T, n_y = space.n_tri, space.n_y
-        raw = triangle_dofs(space)
+        raw = space.dofs
         coo = space.Tm.tocoo()
         ycol = np.full(space.Tm.shape[0], -1)
         ycol[coo.row] = coo.col
         self.ys = ycol[raw]  # y index of each local parameter, -1 if fixed
         self.zfix = np.where(self.ys < 0, space.z_fix[raw], 0.0) / sc.stress
-        H, B = local_blocks(space)
-        self.H, self.B = H * (sc.stress**2 / sc.energy), B  # y / s as unknowns: B per unit stress
         self.g = space.div_rhs.reshape(n_T, 6) / sc.stress
         self.contact = space.contact_y.ravel()
         self.cy = np.zeros(n_y)
@@ -160,17 +175,33 @@ class HybridSolver:
         is_contact[self.contact] = True
         interior = np.flatnonzero((self.count == 2) & ~is_contact)
         self.pins = gauge_pins(space, self.ys, interior, self.first)
-        interior = np.setdiff1d(interior, self.pins)
+        interior = interior[~np.isin(interior, self.pins)]  # few pins: a mask, not a sort
         self.mu_int = np.full(n_y, -1)
         self.mu_int[interior] = np.arange(len(interior))
         self.n_int = len(interior)
         on_face = is_contact[np.maximum(self.ys, 0)] & (self.ys >= 0)
         self.tri_c = np.flatnonzero(on_face.any(1))
-        rest = np.setdiff1d(np.arange(n_T), self.tri_c)
+        # plain triangles: every edge slot free, none on a contact face or under a column; their
+        # local problem is the reference element's, solved in closed form (_plain_setup)
+        plain = (self.ys[:, :12] >= 0).all(1) & ~on_face.any(1)
+        plain[column_slots(space)[0]] = False
+        self.plain = np.flatnonzero(plain)
+        self.special = np.flatnonzero(~plain)  # the general local KKT systems
+        self.at = np.full(n_T, -1)  # row of a special triangle in H, B
+        self.at[self.special] = np.arange(len(self.special))
+        H, B = local_blocks(space, self.special)
+        self.H, self.B = H * (sc.stress**2 / sc.energy), B  # y / s as unknowns: B per unit stress
+        self._plain_setup()
         self.jumps = pair_jumps(space).reshape(len(self.contact), -1)
         self.stats = ActiveSetStats()
         self.n_mu = self.nnz = 0  # size and nonzeros of the last condensed system
-        self.S_rest, self.f_rest = self.condense(rest, np.zeros(n_y, bool), self.mu_int, self.n_int)
+        self.factor = self.S = None  # of the last contact set
+        on_c = np.zeros(n_T, bool)
+        on_c[self.tri_c] = True
+        rest = self.special[~on_c[self.special]]
+        S_rest, f_rest = self.condense(rest, np.zeros(n_y, bool), self.mu_int, self.n_int)
+        S_plain, f_plain = self.condense_plain(self.mu_int, self.n_int, self.g[self.plain])
+        self.S_rest, self.f_rest = S_rest + S_plain, f_rest + f_plain
         self.setup_time = time.perf_counter() - t0
 
     def _occurrences(self) -> None:
@@ -190,14 +221,96 @@ class HybridSolver:
         self.sign[order[start[two]]], self.sign[order[start[two] + 1]] = 1.0, -1.0
         self.sign = self.sign.reshape(self.ys.shape)
 
-    def local_system(self, tri: np.ndarray, sep: np.ndarray) -> tuple:
+    # -- the plain triangles: the divergence eliminated in closed form --------------------------
+    def _plain_setup(self) -> None:
+        """The plain triangles' parametrisation ``z = diag(D, I) (c_p + Z^ w)``: ``D`` their edge-dof
+        blocks, ``Z^`` the 9 self-equilibrated reference combinations, ``c_p`` a reference field of
+        the required divergence; energy ``H_w = sum_p A'_p Z^T G_p Z^`` (9 x 9, six fixed templates
+        weighted by each triangle's compliance seen from the reference element) and its inverse."""
+        sp_, sc, t = self.space, self.space.scales, self.plain
+        _, area = bary_gradients(sp_.X[t])
+        A = np.stack([b.material.compliance for b in sp_.scene.bodies])[sp_.body[t]]
+        Ap = np.einsum("tai,tab,tbj->tij", sp_.piola[t], A, sp_.piola[t])
+        self.ap = np.stack([Ap[:, a, b] for a, b in SYM_PAIRS], 1) * (np.abs(area) / 3.0 * sc.stress**2 / sc.energy)[:, None]
+        self.Hw_inv = np.empty((len(t), 9, 9))
+        for lo in range(0, len(t), CHUNK):
+            c = slice(lo, lo + CHUNK)
+            self.Hw_inv[c] = np.linalg.inv((self.ap[c] @ REF_ENERGY_DIVFREE.reshape(6, 81)).reshape(-1, 9, 9))
+        self.D = inverse2(sp_.coef[t])  # (n, 6, 2, 2): edge dofs of the reference parameters
+
+    def _plain_base(self, c: slice, g: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Reference parameters ``c_p (n, 15)`` of divergence rows ``g`` and ``Z^T H^ c_p (n, 9)``
+        for the plain triangles ``c``; zeros without divergence."""
+        n = len(self.plain[c])
+        if g is None or not np.any(g):
+            return np.zeros((n, 15)), np.zeros((n, 9))
+        cp = divergence_to_reference(self.space.X[self.plain[c]], g) @ REF_DIV_PINV.T
+        mixed = (self.ap[c] @ REF_ENERGY_MIXED.reshape(6, 135)).reshape(-1, 9, 15)
+        return cp, np.einsum("naj,nj->na", mixed, cp)
+
+    def _plain_edges(self, c: slice, zr: np.ndarray) -> np.ndarray:
+        """Local parameters ``(n, 15)`` of reference parameters ``zr`` of plain triangles ``c``."""
+        ze = (self.D[c] @ zr[:, :12].reshape(-1, 6, 2, 1)).reshape(-1, 12)
+        return np.concatenate([ze, zr[:, 12:]], 1)
+
+    def condense_plain(self, mu_of_y: np.ndarray, n_mu: int, g: np.ndarray | None,
+                       matrix: bool = True) -> tuple[sp.csr_matrix | None, np.ndarray]:
+        """The plain triangles' part of ``S`` (lower triangle) and ``f`` (``g`` their divergence rows): ``E = D Z^_e
+        H_w^-1 Z^_e^T D^T``, the edge block of the inverse local KKT system with the divergence
+        eliminated exactly, and ``z(mu = 0) = diag(D, I) (c_p - Z^ H_w^-1 Z^T H^ c_p)``."""
+        Ze = REF_DIVFREE[:12]
+        rows, cols, vals = [], [], []
+        f = np.zeros(n_mu)
+        for lo in range(0, len(self.plain), CHUNK):
+            c = slice(lo, lo + CHUNK)
+            t = self.plain[c]
+            m, sg = self.slot_mu(t, np.ones((len(t), 15), bool), mu_of_y)
+            m, sg = m[:, :12], sg[:, :12]
+            cp, coupling = self._plain_base(c, None if g is None else g[c])
+            if np.any(cp):
+                a = self._plain_edges(c, cp - np.einsum("nab,nb->na", self.Hw_inv[c], coupling) @ REF_DIVFREE.T)
+                f += np.bincount(m[m >= 0], weights=(sg * a[:, :12])[m >= 0], minlength=n_mu)
+            if matrix:
+                Zd = (self.D[c] @ Ze.reshape(6, 2, 9)[None]).reshape(-1, 12, 9)  # D Z^_e, block by block
+                E = Zd @ self.Hw_inv[c] @ Zd.transpose(0, 2, 1)
+                keep = (m[:, None, :] >= 0) & (m[:, :, None] >= m[:, None, :])  # the lower triangle
+                rows.append(np.broadcast_to(m[:, :, None], keep.shape)[keep])
+                cols.append(np.broadcast_to(m[:, None, :], keep.shape)[keep])
+                vals.append((E * sg[:, :, None] * sg[:, None, :])[keep])
+        if not matrix:
+            return None, f
+        if not rows:
+            return sp.csr_matrix((n_mu, n_mu)), f
+        S = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_mu, n_mu))
+        return S, f
+
+    def recover_plain(self, mu_of_y: np.ndarray, mu: np.ndarray, g: np.ndarray | None) -> np.ndarray:
+        """Local parameters ``z (n_plain, 15)`` of the plain triangles for multipliers ``mu`` and
+        divergence rows ``g``: ``w = H_w^-1 (Z^_e^T D^T rhs - Z^T H^ c_p)``."""
+        Ze, out = REF_DIVFREE[:12], []
+        for lo in range(0, len(self.plain), CHUNK):
+            c = slice(lo, lo + CHUNK)
+            t = self.plain[c]
+            m, sg = self.slot_mu(t, np.ones((len(t), 15), bool), mu_of_y)
+            rhs = -(sg * mu[np.maximum(m, 0)])[:, :12]
+            u = (self.D[c].transpose(0, 1, 3, 2) @ rhs.reshape(-1, 6, 2, 1)).reshape(-1, 12)  # D^T rhs
+            cp, coupling = self._plain_base(c, None if g is None else g[c])
+            w = (self.Hw_inv[c] @ (u @ Ze - coupling)[:, :, None])[:, :, 0]
+            out.append(self._plain_edges(c, cp + w @ REF_DIVFREE.T))
+        return np.concatenate(out) if out else np.zeros((0, 15))
+
+    # -- the other triangles: their local KKT systems ------------------------------------------
+    def local_system(self, tri: np.ndarray, sep: np.ndarray, g: np.ndarray | None = None,
+                     homogeneous: bool = False) -> tuple:
         """Local KKT matrices ``(n, 21, 21)`` and right-hand sides (``mu = 0``) of triangles
         ``tri``; fixed parameters (and separated contact ones, ``sep`` over ``y``) become identity
-        rows holding their value. ``B`` is scaled by ``beta = max|H| / max|B|`` per triangle so
-        both blocks are O(1) on small elements (the divergence multipliers come out times ``beta``)."""
-        H, B, ys = self.H[tri], self.B[tri], self.ys[tri]
+        rows holding their value (0 if ``homogeneous``: no data, no gap term, divergence rows
+        ``g``). ``B`` is scaled by ``beta = max|H| / max|B|`` per triangle so both blocks are O(1)
+        on small elements (the divergence multipliers come out times ``beta``)."""
+        H, B, ys = self.H[self.at[tri]], self.B[self.at[tri]], self.ys[tri]
         free = (ys >= 0) & ~sep[np.maximum(ys, 0)]
-        zx = np.where(free, 0.0, self.zfix[tri])
+        zx = np.where(free, 0.0, 0.0 if homogeneous else self.zfix[tri])
+        g = self.g[tri] if g is None else g
         beta = np.abs(H).max((1, 2)) / np.abs(B).max((1, 2))
         Bf = B * free[:, None, :] * beta[:, None, None]
         K = np.zeros((len(tri), 21, 21))
@@ -205,8 +318,9 @@ class HybridSolver:
         K[:, 15:, :15], K[:, :15, 15:] = Bf, Bf.transpose(0, 2, 1)
         d = np.arange(15)
         K[:, d, d] += ~free
-        rhs_y = np.where(free, -self.c_slot[tri] - np.einsum("tij,tj->ti", H, zx), zx)
-        rhs_l = beta[:, None] * (self.g[tri] - np.einsum("tij,tj->ti", B, zx))
+        c = 0.0 if homogeneous else self.c_slot[tri]
+        rhs_y = np.where(free, -c - np.einsum("tij,tj->ti", H, zx), zx)
+        rhs_l = beta[:, None] * (g - np.einsum("tij,tj->ti", B, zx))
         return K, np.concatenate([rhs_y, rhs_l], 1), beta, free
 
     def slot_mu(self, tri: np.ndarray, free: np.ndarray, mu_of_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -214,13 +328,15 @@ class HybridSolver:
         m = np.where(free, mu_of_y[np.maximum(self.ys[tri], 0)], -1)
         return m, np.where(m >= 0, self.sign[tri], 0.0)
 
-    def condense(self, tri: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray, n_mu: int):
-        """``S = sum N^T (K^-1)_yy N`` and ``f = sum N^T z(mu=0)`` of triangles ``tri`` (by chunks)."""
-        S = sp.csr_matrix((n_mu, n_mu))
+    def condense(self, tri: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray, n_mu: int, g: np.ndarray | None = None,
+                 homogeneous: bool = False, matrix: bool = True):
+        """``S = sum N^T (K^-1)_yy N`` (its lower triangle; unless not ``matrix``) and ``f = sum N^T z(mu=0)`` of
+        triangles ``tri`` (by chunks; ``g`` and ``homogeneous`` as in :meth:`local_system`)."""
+        S = sp.csr_matrix((n_mu, n_mu)) if matrix else None
         f = np.zeros(n_mu)
         for lo in range(0, len(tri), CHUNK):
             t = tri[lo: lo + CHUNK]
-            K, rhs, _, free = self.local_system(t, sep)
+            K, rhs, _, free = self.local_system(t, sep, None if g is None else g[lo: lo + CHUNK], homogeneous)
             try:
                 Kinv = np.linalg.inv(K)
             except np.linalg.LinAlgError:
@@ -228,30 +344,33 @@ class HybridSolver:
                                   "fixed?); use the CVXPY path (EquilibriumModel)") from None
             a = np.einsum("tij,tj->ti", Kinv[:, :15], rhs)
             m, sg = self.slot_mu(t, free, mu_of_y)
-            vals = Kinv[:, :15, :15] * sg[:, :, None] * sg[:, None, :]
-            keep = (m[:, :, None] >= 0) & (m[:, None, :] >= 0)
-            rows = np.broadcast_to(m[:, :, None], keep.shape)[keep]
-            cols = np.broadcast_to(m[:, None, :], keep.shape)[keep]
-            S = S + sp.csr_matrix((vals[keep], (rows, cols)), shape=(n_mu, n_mu))
+            if matrix:
+                vals = Kinv[:, :15, :15] * sg[:, :, None] * sg[:, None, :]
+                keep = (m[:, None, :] >= 0) & (m[:, :, None] >= m[:, None, :])  # the lower triangle
+                rows = np.broadcast_to(m[:, :, None], keep.shape)[keep]
+                cols = np.broadcast_to(m[:, None, :], keep.shape)[keep]
+                S = S + sp.csr_matrix((vals[keep], (rows, cols)), shape=(n_mu, n_mu))
             f += np.bincount(m[m >= 0], weights=(sg * a)[m >= 0], minlength=n_mu)
         return S, f
 
-    def recover(self, tri: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray, mu: np.ndarray) -> tuple:
-        """Local parameters ``z (n, 15)``, divergence multipliers ``lam (n, 6)`` and the gradient
-        ``H z + c + B^T lam`` (``= -N mu`` on free slots) of triangles ``tri``, by chunks."""
+    def recover(self, tri: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray, mu: np.ndarray,
+                g: np.ndarray | None = None, homogeneous: bool = False) -> tuple:
+        """Local parameters ``z (n, 15)`` and the gradient ``H z + c + B^T lam`` (``= -N mu`` on
+        free slots) of triangles ``tri``, by chunks (``g``, ``homogeneous``: :meth:`local_system`)."""
         out = []
         for lo in range(0, len(tri), CHUNK):
             t = tri[lo: lo + CHUNK]
-            K, rhs, beta, free = self.local_system(t, sep)
+            K, rhs, beta, free = self.local_system(t, sep, None if g is None else g[lo: lo + CHUNK], homogeneous)
             m, sg = self.slot_mu(t, free, mu_of_y)
             rhs[:, :15] -= sg * mu[np.maximum(m, 0)]
             sol = np.linalg.solve(K, rhs[..., None])[..., 0]
             z, lam = sol[:, :15], beta[:, None] * sol[:, 15:]
-            grad = (np.einsum("tij,tj->ti", self.H[t], z) + self.c_slot[t]
-                    + np.einsum("tji,tj->ti", self.B[t], lam))
-            out.append((z, lam, grad))
-        return tuple(np.concatenate(v) for v in zip(*out, strict=True)) if out else (np.zeros((0, 15)),) * 3
+            grad = (np.einsum("tij,tj->ti", self.H[self.at[t]], z) + (0.0 if homogeneous else self.c_slot[t])
+                    + np.einsum("tji,tj->ti", self.B[self.at[t]], lam))
+            out.append((z, grad))
+        return tuple(np.concatenate(v) for v in zip(*out, strict=True)) if out else (np.zeros((0, 15)),) * 2
 
+    # -- the condensed system -------------------------------------------------------------------
     def numbering(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """Separated ``y`` mask, multiplier index of each ``y`` and their count for the set ``A``."""
         sep = np.zeros(self.space.n_y, bool)
@@ -259,6 +378,25 @@ class HybridSolver:
         mu_of_y = self.mu_int.copy()
         mu_of_y[self.contact[A]] = self.n_int + np.arange(int(A.sum()))
         return sep, mu_of_y, self.n_int + int(A.sum())
+
+    def solve_condensed(self, f: np.ndarray) -> tuple[np.ndarray, float]:
+        """``mu = S^-1 f`` with the kept factor, refined until rounding (the copies of a parameter
+        differ by the residual, and each copy's triangle then misses equilibrium by as much; a
+        step costs one solve); the relative residual."""
+        S = self.S
+        mu = self.factor.solve(f)
+        scale = max(float(np.abs(f).max(initial=0.0)), float(symmetric_product(abs(S), np.abs(mu)).max(initial=0.0)),
+                    1e-300)
+        res = float(np.abs(symmetric_product(S, mu) - f).max(initial=0.0)) / scale
+        for _ in range(REFINE_STEPS):
+            if res <= REFINE_TOL:
+                break
+            step = mu + self.factor.solve(f - symmetric_product(S, mu))
+            res_step = float(np.abs(symmetric_product(S, step) - f).max(initial=0.0)) / scale
+            if not res_step < 0.5 * res:  # stalled: the factor has nothing more to give
+                break
+            mu, res = step, res_step
+        return mu, res
 
     def factor_set(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Multipliers ``mu`` of the equality-constrained QP of contact set ``A`` (one Cholesky)."""
@@ -269,24 +407,10 @@ class HybridSolver:
                           shape=(n_mu, n_mu)) + S_c
         f = np.concatenate([self.f_rest, np.zeros(n_mu - self.n_int)]) + f_c
         t0 = time.perf_counter()
-        factor = SPDFactor(S)
-        self.stats.backend = factor.method
-        mu = factor.solve(f)
-        scale = max(float(np.abs(f).max(initial=0.0)), float((abs(S) @ np.abs(mu)).max(initial=0.0)), 1e-300)
-        res = float(np.abs(S @ mu - f).max(initial=0.0)) / scale
-        # iterative refinement with the same factor: the copies of a parameter differ by the
-        # residual, and each copy's triangle then misses equilibrium by as much (1e-9 of the stress
-        # scale after one solve at level 3, which the exactness step's projection would then have
-        # to factorise for); a step costs one solve
-        for _ in range(REFINE_STEPS):
-            if res <= REFINE_TOL:
-                break
-            step = mu + factor.solve(f - S @ mu)
-            res_step = float(np.abs(S @ step - f).max(initial=0.0)) / scale
-            if not res_step < 0.5 * res:  # stalled: the factor has nothing more to give
-                break
-            mu, res = step, res_step
-        factor.close()
+        self.close()
+        self.factor, self.S = SPDFactor(S, lower=True), S
+        self.stats.backend = self.factor.method
+        mu, res = self.solve_condensed(f)
         self.stats.factor_time += time.perf_counter() - t0
         self.stats.factorizations += 1
         self.n_mu, self.nnz = n_mu, int(S.nnz)
@@ -295,9 +419,14 @@ class HybridSolver:
             raise SolverError(f"{self.what}: {why}; {self.advice[0]}", cli=f"{self.what}: {why}; {self.advice[1]}")
         return mu, sep, mu_of_y
 
+    def close(self) -> None:
+        if self.factor is not None:
+            self.factor.close()
+            self.factor = self.S = None
+
     def contact_state(self, mu: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Contact parameters ``p`` and openings ``nu = -(grad q + B^T lam)`` (0 in contact)."""
-        z, _, grad = self.recover(self.tri_c, sep, mu_of_y, mu)
+        z, grad = self.recover(self.tri_c, sep, mu_of_y, mu)
         out = []
         for slots in (self.first[self.contact], self.second[self.contact]):
             t, s = np.divmod(slots, 15)
@@ -334,17 +463,65 @@ class HybridSolver:
         A, state = iterate(self, A)
         return {"active": A, **state}
 
-    def finish(self, state: dict) -> tuple[np.ndarray, np.ndarray]:
-        """All parameters ``y`` (over ``s``, from each one's first copy) and the divergence
-        multipliers ``(n_T, 6)`` of the final set."""
-        z, lam, _ = self.recover(np.arange(self.space.n_tri), state["sep"], state["mu_of_y"], state["mu"])
-        return z.ravel()[self.first], lam
+    def parameters(self, state: dict, g_special=None, g_plain=None, homogeneous: bool = False) -> np.ndarray:
+        """All parameters ``y`` (over ``s``, from each one's first copy) of multipliers ``state["mu"]``."""
+        z = np.empty((self.space.n_tri, 15))
+        z[self.special] = self.recover(self.special, state["sep"], state["mu_of_y"], state["mu"],
+                                       g_special, homogeneous)[0]
+        z[self.plain] = self.recover_plain(state["mu_of_y"], state["mu"], g_plain)
+        return z.ravel()[self.first]
+
+    def finish(self, state: dict) -> tuple[np.ndarray, int]:
+        """All parameters ``y`` (over ``s``) of the final set, and how many correction solves
+        they took. Taking one copy of each shared parameter leaves the other copy's triangle off
+        equilibrium by the condensed system's residual (``1e-10`` of the stress at level 4: a
+        relative residual at rounding times the large multipliers); each correction solves the
+        same system (the kept factor) for the field, zero on all data, that removes that
+        divergence (``CORRECTIONS`` at most, while it helps)."""
+        y = self.parameters(state)
+        space, s = self.space, self.space.scales.stress
+        last, done = np.inf, 0
+        for _ in range(CORRECTIONS):
+            r = space.divergence_residual(space.vertex_values(s * y)) / s  # (n_T, 6), over s
+            size = float(np.abs(r).max(initial=0.0))
+            if size <= PROJECT_TOL or size > 0.5 * last:
+                break
+            r = self.balanced(r)
+            sep, mu_of_y, n_mu = state["sep"], state["mu_of_y"], self.S.shape[0]
+            _, f = self.condense(self.special, sep, mu_of_y, n_mu, -r[self.special], homogeneous=True, matrix=False)
+            f += self.condense_plain(mu_of_y, n_mu, -r[self.plain], matrix=False)[1]
+            mu, _ = self.solve_condensed(f)
+            y = y + self.parameters({**state, "mu": mu}, -r[self.special], -r[self.plain], homogeneous=True)
+            last, done = size, done + 1
+        self.close()
+        return y, done
+
+    def balanced(self, r: np.ndarray) -> np.ndarray:
+        """The residual ``r (n_T, 6)`` less its least-norm part with work on the floating motions.
+        Its work is a sum of rounding errors (~1e-15 of the loads' work); a correction that kept
+        it would put it all on a pinned parameter's second copy (whose continuity equation is
+        dropped), divided by that parameter's small weight: 3e-13 of the stress in one triangle
+        at level 3. Spread instead, it is ~1e-15 / n_T in every triangle."""
+        rho = rigid_motions(self.space.mesh, joint=True)  # (n_nodes, 2, m)
+        if rho.shape[2] == 0:
+            return r
+        X = self.space.X
+        at = rho[self.space.tri]  # (n_T, 3, 2, m)
+        centre = at.mean(1, keepdims=True)
+        sub = (at + np.roll(at, -1, axis=1) + centre) / 3.0  # at each sub-triangle's centroid
+        _, area = self.space.sub_geometry
+        h = np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2).max(1)
+        a = ((area / h[:, None])[:, :, None, None] * sub).reshape(len(X) * 6, -1)  # (6 n_T, m)
+        work = a.T @ r.ravel()
+        return r - (a @ np.linalg.solve(a.T @ a, work)).reshape(r.shape)
 
     def objective(self, y: np.ndarray) -> float:
         """``1/2 y.H y + lin.y`` of :class:`EquilibriumModel` (without its constant), ``y`` over ``s``."""
-        z = np.where(self.ys >= 0, y[np.maximum(self.ys, 0)], self.zfix)
-        quad = np.einsum("ti,tij,tj->", z, self.H, z) - np.einsum("ti,tij,tj->", self.zfix, self.H, self.zfix)
-        return 0.5 * float(quad) + float(self.cy @ y)
+        sp_, sc = self.space, self.space.scales
+        zero = np.zeros_like(y)
+        quad = (sp_.energy(sp_.vertex_values(sc.stress * y), sp_.column_values(sc.stress * y))
+                - sp_.energy(sp_.vertex_values(zero), sp_.column_values(zero)))
+        return float(quad) / sc.energy + float(self.cy @ y)
 
 
 def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
@@ -354,7 +531,10 @@ def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
     def solve_at(level: int, coarser):
         sp = EquilibriumSpace.from_scene(space.scene, level, space.triangulation)
         start = None if coarser is None else active_from_pairs(sp, *coarser)
-        return sp.contact_x, HybridSolver(sp).run(start)["active"].reshape(-1, 2)
+        hs = HybridSolver(sp)
+        active = hs.run(start)["active"].reshape(-1, 2)
+        hs.close()
+        return sp.contact_x, active
 
     coarse = coarse_start(space.mesh.level, solve_at)
     return None if coarse is None else active_from_pairs(space, *coarse)
@@ -367,8 +547,8 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
     :func:`active_from_pairs` to take it from the P0 fast path or a coarser level); ``None``
     takes it from :func:`coarse_active`. The statistics hold the final ``active`` set, the
     ``objective`` of :class:`~cvxdual.eq.model.EquilibriumModel` at the returned ``y``, the
-    ``multipliers`` (divergence ``(n_T, 6)``, openings ``nu (n_c, 2)``, both nondimensional), the
-    pinned multipliers and the times of the set-up, the factorisations and the exactness step."""
+    ``multipliers`` (openings ``nu (n_c, 2)``, nondimensional), the pinned multipliers, the
+    correction solves and the times of the set-up, the factorisations and the exactness step."""
     t0 = time.perf_counter()
     warm = active is None
     if warm:
@@ -376,7 +556,7 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
     t_warm = time.perf_counter() - t0
     hs = HybridSolver(space)
     state = hs.run(active)
-    y, lam = hs.finish(state)
+    y, corrections = hs.finish(state)
     t1 = time.perf_counter()
     s = space.scales.stress
     y_exact, post = make_exact(space, y * s)
@@ -387,6 +567,6 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
         solver="fast", status="optimal", iterations=st.iterations, solve_time=t1 - t0, backend=st.backend,
         factorizations=st.factorizations, factor_time=st.factor_time, setup_time=hs.setup_time,
         warm_start="coarse level" if warm else "given", warm_start_time=t_warm, active=state["active"].reshape(n_c, 2),
-        post_time=t2 - t1, n_variables=space.n_y, n_equalities=space.div.shape[0], n_inequalities=2 * n_c,
-        objective=hs.objective(y_exact / s), multipliers={"divergence": lam, "opening": state["nu"].reshape(n_c, 2)},
+        corrections=corrections, post_time=t2 - t1, n_variables=space.n_y, n_equalities=6 * space.n_tri, n_inequalities=2 * n_c,
+        objective=hs.objective(y_exact / s), multipliers={"opening": state["nu"].reshape(n_c, 2)},
         pinned=hs.pins, n_mu=hs.n_mu, nnz=hs.nnz, **post)

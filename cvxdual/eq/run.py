@@ -23,11 +23,10 @@ from ..reference.exact import exact_field
 from ..scene import Scene
 from ..solution import Solution, SolverStats, check_solution
 from .bounds import (
-    admissibility_residuals,
     certified_bounds,
-    constraint_blocks,
     contact_slack,
     contact_tractions,
+    edge_constraints,
     exact_errors,
 )
 from .contact import edge_contact
@@ -119,10 +118,10 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: 
     """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma``, ``g`` and ``u``;
     ``times`` of the phases before (the recovery's and the total are added)."""
     t3 = time.perf_counter()
-    blocks = constraint_blocks(space)
+    blocks = edge_constraints(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks, g=g)
     v = b["displacement"]
-    res = admissibility_residuals(space, sigma, blocks, g)
+    res = dict(b["residuals"])
     sc = space.scales
     delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
     _, smin, _ = contact_slack(space, v)

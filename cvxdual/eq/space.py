@@ -53,7 +53,11 @@ from .element import (
     MASS0,
     bary_gradients,
     divergence_rows,
+    edge_blocks,
+    inverse2,
     local_basis,
+    mapped_values,
+    piola,
     sub_vertices,
     traction_rows,
     unit,
@@ -61,6 +65,10 @@ from .element import (
 
 N_GAUSS = 10  # per edge: tractions and gap products (degree 19; exact for the built-in data)
 FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
+# equilibrium residual (relative to the stress scale) below which the field is left as solved: an
+# order under the certificate's "exact to rounding" (eq.bounds.ADMISSIBLE_TOL) and above the
+# rounding of evaluating it (~5e-14 measured); a projection costs a factorisation of B B^T
+PROJECT_TOL = 1e-13
 
 
 @dataclass(frozen=True)
@@ -68,10 +76,13 @@ class EquilibriumSpace:
     """The equilibrium stress space of a mesh and its pieces, with its admissibility data
     (physical units); built complete by :meth:`from_pieces` and never changed afterwards.
 
-    Geometry: ``X (n_T, 3, 2)`` macro triangles (the straight pieces), ``body (n_T,)``, ``basis
-    (n_T, 27, 15)`` (the face edges' ties merged in). Raw parameters ``z`` (``4 n_E`` edge dofs,
-    then ``3 n_T`` bubbles) = ``Tm y + z_fix``; vertex values ``sigma = P z = S y + sigma0``
-    (``S``: :attr:`stress_map`); column values ``g = z[column_dofs]`` ``(n_col, 2)`` at both ends
+    Geometry: ``X (n_T, 3, 2)`` macro triangles (the straight pieces), ``body (n_T,)``. The local
+    basis of triangle ``t`` is the reference basis mapped by ``piola[t]`` (``(n_T, 3, 3)``, Voigt)
+    with edge coefficient blocks ``coef[t]`` (``(n_T, 6, 2, 2)``: the inverse edge-dof blocks, the
+    face edges' ties merged in; :mod:`cvxdual.eq.element`); local slot ``i`` of ``t`` is raw parameter
+    ``dofs[t, i]``. Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) = ``Tm y +
+    z_fix``; vertex values ``sigma = P z = S y + sigma0`` (``S``: :attr:`stress_map`, built on
+    demand: the fast route never forms it); column values ``g = z[column_dofs]`` ``(n_col, 2)`` at both ends
     of every column interval ``columns`` (indices into ``faces``; energy ``column_energy_blocks``). ``div``:
     rows ``h_T div sigma`` with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the
     ``y`` index of the vertical stress at both ends of each contact edge (``contact_x (n_c, 2)``).
@@ -83,13 +94,13 @@ class EquilibriumSpace:
     tri: np.ndarray  # (n_T, 3) nodes of the macro triangles
     X: np.ndarray
     body: np.ndarray
-    basis: np.ndarray
+    piola: np.ndarray
+    coef: np.ndarray
+    dofs: np.ndarray
     edges: dict
-    P: sp.csr_matrix
     Tm: sp.csr_matrix
     z_fix: np.ndarray
     kind: np.ndarray
-    div: sp.csr_matrix
     div_rhs: np.ndarray
     contact_y: np.ndarray
     contact_x: np.ndarray
@@ -126,16 +137,53 @@ class EquilibriumSpace:
         return self.Tm.shape[1]
 
     @cached_property
+    def sub_geometry(self) -> tuple[np.ndarray, np.ndarray]:
+        """Barycentric gradients ``(n_T, 3, 3, 2)`` and areas ``(n_T, 3)`` of the sub-triangles."""
+        return bary_gradients(sub_vertices(self.X))
+
+    def local_basis(self, t: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """``(len(t), 27, 15)``: vertex values of the local basis of triangles ``t``."""
+        return local_basis(self.piola[t], self.coef[t])
+
+    @property
+    def basis(self) -> np.ndarray:
+        """``(n_T, 27, 15)``: every local basis (405 numbers a triangle: formed on request only)."""
+        return self.local_basis()
+
+    @cached_property
+    def P(self) -> sp.csr_matrix:
+        """``P``: vertex values ``(27 n_T)`` of the raw parameters (the CVXPY model's map)."""
+        return self.vertex_map()
+
+    def vertex_map(self, t: np.ndarray | None = None) -> sp.csr_matrix:
+        """``P`` restricted to the rows of triangles ``t`` (all by default; the others' rows empty)."""
+        t = np.arange(self.n_tri) if t is None else np.asarray(t, int)
+        rows = 27 * t[:, None] + np.arange(27)[None, :]
+        return assemble_blocks(rows, self.dofs[t], self.local_basis(t), (27 * self.n_tri, len(self.kind)))
+
+    @cached_property
+    def div(self) -> sp.csr_matrix:
+        """Rows ``h_T div sigma`` on the vertex values (6 per macro triangle)."""
+        n_T = self.n_tri
+        return assemble_blocks(6 * np.arange(n_T)[:, None] + np.arange(6)[None, :],
+                               27 * np.arange(n_T)[:, None] + np.arange(27)[None, :],
+                               divergence_rows(self.X)[0], (6 * n_T, 27 * n_T))
+
+    @cached_property
     def stress_map(self) -> sp.csr_matrix:
         return (self.P @ self.Tm).tocsr()
 
     @property
     def sigma0(self) -> np.ndarray:
-        return self.P @ self.z_fix
+        return self.raw_values(self.z_fix).ravel()
+
+    def raw_values(self, z: np.ndarray) -> np.ndarray:
+        """Vertex stresses ``(n_T, 27)`` of raw parameters ``z``, triangle by triangle."""
+        return mapped_values(self.piola, self.coef, np.asarray(z, float)[self.dofs])
 
     def vertex_values(self, y: np.ndarray) -> np.ndarray:
         """Vertex stresses ``(n_T, 27)`` of parameters ``y``."""
-        return (self.P @ (self.Tm @ y + self.z_fix)).reshape(self.n_tri, 27)
+        return self.raw_values(self.Tm @ y + self.z_fix)
 
     def stresses(self, y: np.ndarray) -> np.ndarray:
         """``(n_sub, 3, 3)``: Voigt values at the vertices of sub-triangle ``3 t + i``."""
@@ -179,12 +227,35 @@ class EquilibriumSpace:
 
     def energy_matrix(self) -> sp.csr_matrix:
         """``Q`` with ``1/2 sigma.Q sigma = 1/2 int sigma:A sigma`` on vertex values (exact P1 mass)."""
-        _, area = bary_gradients(sub_vertices(self.X))
+        _, area = self.sub_geometry
         A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]  # (n_T, 3, 3)
         blk = area[:, :, None, None, None, None] * MASS0[None, None, :, None, :, None] * A[:, None, None, :, None, :]
         idx = 9 * np.arange(3 * self.n_tri)[:, None] + np.arange(9)[None, :]
         n = 27 * self.n_tri
         return assemble_blocks(idx, idx, blk.reshape(3 * self.n_tri, 9, 9), (n, n))
+
+    def divergence_residual(self, sigma: np.ndarray) -> np.ndarray:
+        """``(n_T, 6)``: ``h_T (div sigma + F)`` on every sub-triangle of vertex values ``sigma``
+        (the rows of :attr:`div` minus ``div_rhs``, without forming them)."""
+        g, _ = self.sub_geometry  # (n_T, 3, 3, 2)
+        s = np.asarray(sigma, float).reshape(self.n_tri, 3, 3, 3)
+        grad = s.transpose(0, 1, 3, 2) @ g  # (n_T, 3, 3, 2): d s_c / d x_k on every sub-triangle
+        h = np.linalg.norm(self.X - np.roll(self.X, 1, axis=1), axis=2).max(1)
+        d = np.stack([grad[:, :, 0, 0] + grad[:, :, 2, 1], grad[:, :, 2, 0] + grad[:, :, 1, 1]], -1)
+        return (h[:, None, None] * d).reshape(self.n_tri, 6) - self.div_rhs.reshape(self.n_tri, 6)
+
+    def energy(self, sigma: np.ndarray, g: np.ndarray | None = None) -> float:
+        """``1/2 int sigma:A sigma`` of vertex values ``sigma`` and column values ``g``
+        (:meth:`energy_matrix` and :meth:`column_energy_matrix`, without forming them)."""
+        _, area = self.sub_geometry
+        s = np.asarray(sigma, float).reshape(self.n_tri, 3, 3, 3)  # triangle, sub, vertex, Voigt
+        A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]
+        MsA = (MASS0 @ s) @ A[:, None]  # (sum_b M_ab sigma_b) A at every vertex (A symmetric)
+        e = float(area.ravel() @ (s * MsA).sum((2, 3)).ravel())
+        if g is not None and len(self.columns):
+            gv = np.asarray(g, float).reshape(-1, 2)
+            e += float(np.einsum("ci,cij,cj->", gv, self.column_energy_blocks, gv))
+        return 0.5 * e
 
     def gap_weights(self) -> np.ndarray:
         """``(n_c, 2)``: ``int phi_e eps dx`` of the two end hats of each contact edge, so that
@@ -368,32 +439,28 @@ def _zero(part) -> bool:
     return part.kind == "traction" and part.traction.kind == "uniform" and not np.any(part.traction.value)
 
 
-def tie_basis(basis: np.ndarray, edges: dict, face_edge: np.ndarray) -> np.ndarray:
-    """The local basis with the ties of the face edges ``face_edge`` merged in: at each end of
-    such an edge the normal column becomes ``n_gy^2 N_n + n_gx n_gy N_t`` (the vertex values of
-    ``sigma n_g = (0, g n_gy)``, the column field's traction, per unit ``g``) and the tangential
-    column 0 (its dof is fixed at 0). On a horizontal edge this is the identity."""
-    basis = basis.copy()
+def tie_blocks(coef: np.ndarray, edges: dict, face_edge: np.ndarray) -> np.ndarray:
+    """The edge coefficient blocks with the ties of the face edges ``face_edge`` merged in: at each
+    end of such an edge the normal basis column becomes ``n_gy^2 N_n + n_gx n_gy N_t`` (the vertex
+    values of ``sigma n_g = (0, g n_gy)``, the column field's traction, per unit ``g``) and the
+    tangential column 0 (its dof is fixed at 0). On a horizontal edge this is the identity."""
+    coef = coef.copy()
     t, j = edges["owner"][face_edge].T
     ng = edges["ng"][face_edge]
-    cn, ct = ng[:, 1] ** 2, ng[:, 0] * ng[:, 1]
+    mix = np.stack([ng[:, 1] ** 2, ng[:, 0] * ng[:, 1]], 1)  # (m, 2)
     for le in range(2):
-        n_slot = 4 * j + 2 * le
-        merged = cn[:, None] * basis[t, :, n_slot] + ct[:, None] * basis[t, :, n_slot + 1]
-        basis[t, :, n_slot] = merged
-        basis[t, :, n_slot + 1] = 0.0
-    return basis
+        blk = coef[t, 2 * j + le]  # (m, 2, 2)
+        coef[t, 2 * j + le, :, 0] = np.einsum("mab,mb->ma", blk, mix)
+        coef[t, 2 * j + le, :, 1] = 0.0
+    return coef
 
 
-def vertex_map(basis: np.ndarray, edges: dict, n_raw: int) -> sp.csr_matrix:
-    """``P``: vertex values ``(27 n_T)`` of the raw parameters (edge dofs shared, bubbles own)."""
-    n_T = len(basis)
+def local_dofs(edges: dict, n_T: int) -> np.ndarray:
+    """``(n_T, 15)``: the raw parameter of each local slot (edge dofs by global end, then bubbles)."""
     e = np.arange(2)[None, None, :, None] ^ edges["flip"][:, :, None, None]  # global end of local end
     edof = 4 * edges["id"][:, :, None, None] + 2 * e + np.arange(2)[None, None, None, :]
-    dofmap = np.concatenate([edof.reshape(n_T, 12), 4 * len(edges["keys"]) + 3 * np.arange(n_T)[:, None]
-                             + np.arange(3)[None, :]], axis=1)
-    rows = 27 * np.arange(n_T)[:, None] + np.arange(27)[None, :]
-    return assemble_blocks(rows, dofmap, basis, (27 * n_T, n_raw))
+    return np.concatenate([edof.reshape(n_T, 12), 4 * len(edges["keys"]) + 3 * np.arange(n_T)[:, None]
+                           + np.arange(3)[None, :]], axis=1)
 
 
 def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSpace:
@@ -411,7 +478,8 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     face_edge = edge_ids(edges, faces.left, faces.right, mesh.n_nodes)
     ng_local = edges["ng"][edges["id"]]  # (n_T, 3, 2)
     cl = classify(mesh, edges, X, exact_field(scene), faces, face_edge)
-    basis = tie_basis(local_basis(X, ng_local), edges, face_edge[cl["tied"]])
+    Q = piola(X)
+    coef = tie_blocks(inverse2(edge_blocks(Q, ng_local)), edges, face_edge[cl["tied"]])
     kind = cl["kind"]
     free = np.flatnonzero(kind == FREE)
     n_c = len(cl["contact_x"])
@@ -423,10 +491,7 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     Tm = sp.csr_matrix((np.ones(int(live.sum())), (np.flatnonzero(live), ycol[live])),
                        shape=(len(kind), len(free) + 2 * n_c))
     z_fix = np.where(kind == FIXED, cl["value"], 0.0)
-    rows, _, h = divergence_rows(X)
-    n_T = len(X)
-    div = assemble_blocks(6 * np.arange(n_T)[:, None] + np.arange(6)[None, :],
-                          27 * np.arange(n_T)[:, None] + np.arange(27)[None, :], rows, (6 * n_T, 27 * n_T))
+    h = np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2).max(1)  # as in divergence_rows
     F = np.array([b.body_force for b in scene.bodies])[body]
     div_rhs = -(h[:, None, None] * F[:, None, :]).repeat(3, axis=1).reshape(-1)
     contact_y = len(free) + np.arange(2 * n_c).reshape(n_c, 2)
@@ -435,9 +500,9 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     where = np.full(len(faces), -1)
     where[columns] = np.arange(len(columns))
     compliance = np.stack([b.material.compliance for b in scene.bodies])
-    space = EquilibriumSpace(mesh=mesh, pieces=pieces, triangulation=triangulation, tri=tri, X=X, body=body, basis=basis, edges=edges,
-                             P=vertex_map(basis, edges, len(kind)), Tm=Tm, z_fix=z_fix, kind=kind,
-                             div=div, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],
+    space = EquilibriumSpace(mesh=mesh, pieces=pieces, triangulation=triangulation, tri=tri, X=X, body=body,
+                             piola=Q, coef=coef, dofs=local_dofs(edges, len(X)), edges=edges, Tm=Tm, z_fix=z_fix,
+                             kind=kind, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],
                              traction_edges=cl["traction"], faces=faces, face_edge=face_edge, columns=columns,
                              column_dofs=cl["raw_n"][columns],
                              column_energy_blocks=column_energy(pieces, faces, slab_iv, compliance)[columns],
@@ -492,7 +557,8 @@ def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
 def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For displacements ``r (n_nodes, 2, m)`` linear on each triangle: the boundary work
     ``int_bnd (sigma n).r ds`` as rows ``W (m, 27 n_T)`` on vertex values (exact: linear times
-    linear), and the body-force work ``int F.r`` ``(m,)`` with its absolute size ``(m,)``."""
+    linear; sparse: boundary sub-triangles only), and the body-force work ``int F.r`` ``(m,)`` with
+    its absolute size ``(m,)``."""
     ed, tri = space.edges, space.tri
     b = ed["boundary"]
     t, j = ed["owner"][b, 0], ed["owner"][b, 1]
@@ -502,16 +568,22 @@ def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.nd
     ell = ed["length"][b][:, None, None] / 6.0
     c0 = ell * np.einsum("bki,bkm->bim", T, 2 * r0 + r1)
     c1 = ell * np.einsum("bki,bkm->bim", T, r0 + 2 * r1)
-    W = np.zeros((r.shape[2], 27 * space.n_tri))
     base = 27 * t + 9 * j
-    for a, cv in ((0, c0), (1, c1)):
-        cols = base[:, None] + 3 * a + np.arange(3)[None, :]
-        np.add.at(W.T, cols.ravel(), cv.reshape(-1, r.shape[2]))
+    cols = np.concatenate([(base[:, None] + 3 * a + np.arange(3)[None, :]).ravel() for a in (0, 1)])
+    vals = np.concatenate([cv.reshape(-1, r.shape[2]) for cv in (c0, c1)])  # (rows of cols, m)
+    m = r.shape[2]
+    W = sp.csr_matrix((vals.T.ravel(), (np.repeat(np.arange(m), len(cols)), np.tile(cols, m))),
+                      shape=(m, 27 * space.n_tri))  # duplicates (shared vertices) are summed
     _, area = bary_gradients(space.X)
     F = np.array([bd.body_force for bd in space.scene.bodies])[space.body]
     rm = r[tri].mean(1)  # (n_T, 2, m): r at the centroid
     terms = area[:, None] * np.einsum("tk,tkm->tm", F, rm)
     return W, terms.sum(0), np.abs(terms).sum(0)
+
+
+def boundary_triangles(space: EquilibriumSpace) -> np.ndarray:
+    """The triangles with an edge on the boundary (the only ones :func:`work_rows` reads)."""
+    return np.unique(space.edges["owner"][space.edges["boundary"], 0])
 
 
 def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
@@ -527,7 +599,7 @@ def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
     loaded = np.flatnonzero(space.z_fix != 0)
     if len(loaded) == 0:
         return space.z_fix, imbalance
-    G = (sp.csr_matrix(W) @ space.P)[:, loaded].toarray()
+    G = (W @ space.vertex_map(boundary_triangles(space)))[:, loaded].toarray()
     z_fix = space.z_fix.copy()
     z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
     return z_fix, imbalance
@@ -564,9 +636,8 @@ def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray,
     if r.shape[2] == 0:
         return y, 0.0
     W, bf, _ = work_rows(space, r)
-    WS = sp.csr_matrix(W) @ space.stress_map
-    a = WS[:, ci].toarray()
-    resid = WS @ y + W @ space.sigma0 + bf  # should be zero: each body in balance
+    a = (W @ space.vertex_map(boundary_triangles(space)) @ space.Tm[:, ci]).toarray()
+    resid = W @ space.vertex_values(y).ravel() + bf  # should be zero: each body in balance
     D = np.abs(p)
     lam = np.linalg.lstsq((a * D) @ a.T, -resid, rcond=None)[0]
     dp = D * (a.T @ lam)
@@ -614,10 +685,19 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30)
 
 
 def make_exact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, dict]:
-    """The post-step: clip and balance the contact tractions, then project onto the
-    equilibrium equations. Everything else (traction continuity, boundary data, zero
-    tangential contact traction, action = reaction) holds by the parametrisation."""
-    y1, rel = balance_contact(space, y)
-    y2, iters = project_equilibrium(space, y1)
-    change = float(np.abs(y2 - y).max() / space.scales.stress)
-    return y2, {"contact_change": rel, "projection_iterations": iters, "max_change": change}
+    """The post-step: clip the contact tractions to ``sigma_nn <= 0``; unless equilibrium then
+    holds to rounding (``PROJECT_TOL``: the fast route's corrected fields do), balance the contact
+    tractions and project onto the equilibrium equations (a solver's field at its tolerance).
+    Everything else (traction continuity, boundary data, zero tangential contact traction,
+    action = reaction) holds by the parametrisation."""
+    ci = space.contact_y.ravel()
+    y1 = y.copy()
+    y1[ci] = np.minimum(y[ci], 0.0)
+    rel, iters = float(np.abs(y1 - y).max() / max(float(np.abs(y[ci]).max(initial=0.0)), 1e-300)), 0
+    if np.abs(space.divergence_residual(space.vertex_values(y1))).max() > PROJECT_TOL * space.scales.stress:
+        # a rebalance moves the contact tractions by rounding, which alone is ~1e-13 of the stress
+        # in the contact triangles: only where a projection follows
+        y1, rel = balance_contact(space, y)
+        y1, iters = project_equilibrium(space, y1)
+    change = float(np.abs(y1 - y).max() / space.scales.stress)
+    return y1, {"contact_change": rel, "projection_iterations": iters, "max_change": change}
