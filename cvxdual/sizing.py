@@ -27,10 +27,10 @@ from .geometry.triangulation import column_breaks
 from .validate import short
 
 BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)
-# Peak resident bytes per mesh triangle, measured on hertz at levels 2-6 (studies/memory.py),
+# Peak resident bytes per mesh triangle, measured at levels 2-6 (studies/memory.py, reports/memory.md),
 # rounded up. "cvxpy": the P0 dual through CVXPY and Clarabel; "fast": the P0 fast path; on top
 # of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy").
-BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 40e3, "eq_cvxpy": 100e3}
+BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3}
 ENV = "CVXDUAL_MAX_MEMORY"
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
           "TIB": 2**40}

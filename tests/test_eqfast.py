@@ -17,7 +17,7 @@ from cvxdual.eq.fast import (
     solve_eq_fast,
 )
 from cvxdual.eq.model import EquilibriumModel
-from cvxdual.eq.space import EquilibriumSpace
+from cvxdual.eq.space import PROJECT_TOL, EquilibriumSpace
 from cvxdual.errors import SolverError
 
 # Clarabel stops at relative gaps ~1e-8: its stresses differ from the exact optimum by ~1e-8-1e-7
@@ -61,7 +61,7 @@ def test_local_dofs_match_the_vertex_map():
     """The local slots are the columns of ``P`` that the basis fills, triangle by triangle."""
     sp = space("hertz", 0)
     dofs = sp.dofs
-    P = sp.P.toarray()
+    P = sp.raw_map.toarray()
     blocks = np.stack([P[27 * t: 27 * t + 27][:, dofs[t]] for t in range(sp.n_tri)])
     assert np.array_equal(blocks, sp.basis)
 
@@ -78,6 +78,43 @@ def test_agrees_with_cvxpy(scene, level):
     p = model.y_exact[sp.contact_y]
     # Clarabel leaves separated ends at ~1e-9 of the largest pressure (interior point): 1e-6 splits them
     assert np.array_equal(p < -1e-6 * np.abs(p).max(initial=0.0), info["active"])
+
+
+@pytest.mark.parametrize("scene,tri", [("hertz", "type1"), ("cylinder-on-block", "type2"), ("wavy", "type1")])
+def test_closed_form_triangles_agree_with_their_kkt_systems(scene, tri):
+    """The plain triangles' closed form (divergence eliminated through the reference element's
+    self-equilibrated fields) and their local KKT systems give the same condensed system and the
+    same stresses: two routes to one discrete solution."""
+    sp = EquilibriumSpace.from_scene(cd.load_scene(scene), 2, tri)
+    fast_hs, kkt_hs = HybridSolver(sp), HybridSolver(sp, closed_form=False)
+    assert len(fast_hs.plain) > 0.7 * sp.n_tri and len(kkt_hs.plain) == 0
+    S1, S2 = fast_hs.S_rest, kkt_hs.S_rest
+    # both are sums of exact local inverses: rounding of O(|S|) entries (measured ~1e-13)
+    assert abs(S1 - S2).max() <= 1e-11 * abs(S2).max()
+    start = np.ones(sp.contact_y.shape, bool)
+    y1, _ = fast_hs.finish(fast_hs.run(start))
+    y2, _ = kkt_hs.finish(kkt_hs.run(start))
+    assert relative(sp.stresses(y1), sp.stresses(y2)) < 1e-10  # rounding of the same solve
+
+
+@pytest.mark.parametrize("scene,tri", [("hertz", "type1"), ("blocks", "type1"), ("cylinder-in-groove", "type1"),
+                                       ("cylinder-on-block", "type2")])
+def test_corrections_make_the_field_exact_without_a_projection(scene, tri):
+    """One correction solve with the kept factor removes the residual that taking one copy of
+    each shared parameter leaves (1e-10 of the stress at level 3), so the exactness step has no
+    projection to do; the pinned parameters' share is spread, not left in one triangle."""
+    sp = EquilibriumSpace.from_scene(cd.load_scene(scene), 3, tri)
+    hs = HybridSolver(sp)
+    state = hs.run(np.ones(sp.contact_y.shape, bool))
+    y0 = hs.parameters(state)
+    before = np.abs(sp.divergence_residual(sp.vertex_values(sp.scales.stress * y0))).max() / sp.scales.stress
+    y, info = solve_eq_fast(sp)
+    after = np.abs(sp.divergence_residual(sp.vertex_values(y))).max() / sp.scales.stress
+    assert before > 1e-12  # the residual is there to correct (measured 1e-11 to 3e-10)
+    assert info["corrections"] >= 1 and info["projection_iterations"] == 0
+    assert after <= PROJECT_TOL  # below the exactness threshold (measured 1e-14 to 5e-14)
+    res = admissibility_residuals(sp, sp.stresses(y), g=sp.column_values(y))
+    assert max(res.values()) < EXACT, res
 
 
 @pytest.mark.parametrize("scene", ["hertz", "blocks"])

@@ -18,14 +18,23 @@ from cvxdual.eq.bounds import (
     exact_errors,
 )
 from cvxdual.eq.element import (
+    MASS0,
+    REF_DIV,
+    REF_DIVFREE,
+    REF_ENERGY,
+    bary_gradients,
     divergence_rows,
+    divergence_to_reference,
     edge_blocks,
     edge_dof_rows,
+    energy_coefficients,
     internal_rows,
     inverse2,
     least_norm_basis,
     local_basis,
     piola,
+    reference_energy,
+    sub_vertices,
 )
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_motions
@@ -80,6 +89,39 @@ def test_local_counts_and_basis_exact():
     bub = N0[:, :, 12:]
     coef = np.linalg.solve(bub.transpose(0, 2, 1) @ bub, bub.transpose(0, 2, 1) @ (N - N0))
     assert np.abs(bub @ coef - (N - N0)).max() < 1e-12 * np.abs(N).max()  # rounding of O(1) values
+
+
+def test_reference_templates_give_every_triangles_energy_and_equilibrium():
+    """Mapped by the double Piola map, the reference element's six energy templates give each
+    triangle's energy matrix (assembled here from its own basis and P1 mass matrices), its nine
+    self-equilibrated fields have no divergence, and divergence rows map as ``J / det J``."""
+    space = EquilibriumSpace.from_scene(cd.load_scene("cylinder-on-block"), 0, "type2")
+    X, Q, C = space.X, space.piola, space.coef
+    N = space.local_basis()
+    A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body]
+    _, sub_area = bary_gradients(sub_vertices(X))
+    K9 = (MASS0[None, :, None, :, None] * A[:, None, :, None, :]).reshape(-1, 9, 9)
+    H = sum(sub_area[:, i, None, None] * (N[:, 9 * i: 9 * i + 9].transpose(0, 2, 1) @ K9 @ N[:, 9 * i: 9 * i + 9])
+            for i in range(3))
+    coef = energy_coefficients(Q, A, np.abs(bary_gradients(X)[1]))
+    Cf = np.zeros((space.n_tri, 15, 15))  # parameters -> reference parameters
+    for k in range(6):
+        Cf[:, 2 * k: 2 * k + 2, 2 * k: 2 * k + 2] = C[:, k]
+    Cf[:, 12:, 12:] = np.eye(3)
+    H_ref = Cf.transpose(0, 2, 1) @ reference_energy(coef, REF_ENERGY) @ Cf
+    untied = np.setdiff1d(np.arange(space.n_tri), space.edges["owner"][space.face_edge, 0])
+    scale = np.abs(H).max((1, 2))[:, None, None]
+    # the same integrals, summed in another order: rounding (measured ~1e-15 relative)
+    assert np.abs(H_ref - H)[untied].max() / scale[untied].max() < 1e-12
+    D = inverse2(C[untied])  # the untied triangles' edge-dof blocks
+    Z = np.concatenate([(D @ REF_DIVFREE[:12].reshape(6, 2, 9)[None]).reshape(-1, 12, 9),
+                        np.broadcast_to(REF_DIVFREE[12:], (len(untied), 3, 9))], 1)
+    B = divergence_rows(X[untied])[0] @ N[untied]
+    assert np.abs(B @ Z).max() < 1e-12 * np.abs(B).max()  # self-equilibrated to rounding
+    z = np.random.default_rng(0).standard_normal((len(untied), 15))
+    zr = np.einsum("tij,tj->ti", Cf[untied], z)
+    g = np.einsum("tij,tj->ti", B, z)
+    assert np.abs(divergence_to_reference(X[untied], g) - zr @ REF_DIV.T).max() < 1e-12 * np.abs(g).max()
 
 
 @pytest.mark.parametrize("scene,tri,floating", [("patch", "type1", 0), ("hertz", "type1", 1), ("blocks", "type1", 0),
@@ -141,6 +183,26 @@ def test_every_constraint_exact_after_post_step(scene):
     assert max(good.values()) < EXACT, good
     assert np.all(fixed[ci] <= 0)
     assert info["max_change"] < 1e-5  # relative: the repair is of the size of the perturbation
+
+
+@pytest.mark.parametrize("scene,tri", [("hertz", "type1"), ("cylinder-on-block", "type2")])
+def test_local_residuals_agree_with_the_assembled_rows(scene, tri):
+    """The internal-jump and divergence residuals evaluated triangle by triangle equal those of
+    the assembled constraint rows (two implementations), on an exact and on a perturbed field."""
+    space = EquilibriumSpace.from_scene(cd.load_scene(scene), 1, tri)
+    blocks = constraint_blocks(space)
+    rng = np.random.default_rng(1)
+    y = rng.standard_normal(space.n_y) * space.scales.stress
+    g = space.column_values(y)
+    noise = 1e-6 * space.scales.stress * rng.standard_normal((space.n_tri, 27))
+    for sigma in (space.vertex_values(y), space.vertex_values(y) + noise):
+        full = admissibility_residuals(space, sigma, blocks, g)
+        fast = admissibility_residuals(space, sigma, g=g)
+        assert set(full) == set(fast)
+        for name in full:
+            # the same sums in another order: rounding of O(1) residuals relative to the stress scale
+            assert fast[name] == pytest.approx(full[name], rel=1e-9, abs=1e-13), name
+    assert fast["internal"] > 1e-8  # the perturbation shows
 
 
 # -- the bounds ------------------------------------------------------------------------------

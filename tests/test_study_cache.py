@@ -197,7 +197,8 @@ INFO_ROWS = {"another level's info": forge(level=3), "another triangulation's": 
              "error est. is null": forge(error_est=None), "error est. negative": forge(error_est=-1e-3),
              "error est. is a string": forge(error_est="small"), "rate is a dict": forge(rate={"p": 1}),
              "d_last NaN": forge(d_last=float("nan")), "n_pieces 0": forge(n_pieces=0),
-             "missing error est.": forge(error_est=DROP)}
+             "missing error est.": forge(error_est=DROP), "another stress space's": forge(stress_space="eq"),
+             "negative certified bound": forge(certified=-0.1), "certified is a string": forge(certified="1%")}
 
 
 # -- corruptions of arrays (npz) ---------------------------------------------------------------
@@ -332,7 +333,8 @@ def valid_row(case, key: str) -> dict:
 
 def valid_info(ref) -> dict:
     return {"level": ref.level, "triangulation": ref.triangulation, "solver": ref.solver, "n_pieces": 4 * N,
-            "d_last": 1e-4, "d_before": 4e-4, "rate": 2.0, "error_est": 3e-5}
+            "d_last": 1e-4, "d_before": 4e-4, "rate": 2.0, "error_est": 3e-5, "stress_space": ref.stress_space,
+            "certified": None}
 
 
 def _arrays(n: int, seed: int) -> dict:

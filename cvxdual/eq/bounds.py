@@ -25,7 +25,7 @@ from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
 from ..voigt import VOIGT_WEIGHT
 from .columns import CONCAVE1, column_gap
-from .element import MASS0, bary_gradients, frame_rows, internal_rows, sub_vertices
+from .element import MASS0, bary_gradients, frame_rows, internal_rows
 from .space import FIXED, N_GAUSS, EquilibriumSpace, outward_normals
 
 ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"

@@ -215,11 +215,16 @@ def local_basis(Q: np.ndarray, C: np.ndarray) -> np.ndarray:
     return (Q[:, None] @ N).reshape(-1, 27, 15)
 
 
-def reference_energy(Q: np.ndarray, A: np.ndarray, area: np.ndarray, templates: np.ndarray) -> np.ndarray:
-    """``sum_p A'_p G_p |T| / 3`` with ``A' = Q^T A Q`` (the compliance seen by the reference
-    element): the energy matrix of the reference parameters (``templates`` ``REF_ENERGY``) or
-    of the self-equilibrated ones (``REF_ENERGY_DIVFREE``), vectorised over triangles."""
-    Ap = np.einsum("tai,tab,tbj->tij", Q, A, Q)
-    coef = np.stack([Ap[:, a, b] for a, b in SYM_PAIRS], 1) * (area / 3.0)[:, None]
+def energy_coefficients(Q: np.ndarray, A: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """``(n, 6)``: the entries ``A'_p |T| / 3`` (``SYM_PAIRS``) of ``A' = Q^T A Q``, the compliance
+    seen by the reference element, times the sub-triangle area: with the templates,
+    ``sum_p coef_p REF_ENERGY[p]`` is the energy matrix of the reference parameters of ``T``
+    (``REF_ENERGY_DIVFREE``: of its self-equilibrated ones)."""
+    Ap = Q.transpose(0, 2, 1) @ A @ Q
+    return np.stack([Ap[:, a, b] for a, b in SYM_PAIRS], 1) * (area / 3.0)[:, None]
+
+
+def reference_energy(coef: np.ndarray, templates: np.ndarray) -> np.ndarray:
+    """``sum_p coef_p templates[p]`` for every triangle (:func:`energy_coefficients`)."""
     m = templates.shape[1]
     return (coef @ templates.reshape(6, m * m)).reshape(-1, m, m)

@@ -40,11 +40,12 @@ from .element import (
     REF_DIVFREE,
     REF_ENERGY_DIVFREE,
     REF_ENERGY_MIXED,
-    SYM_PAIRS,
     bary_gradients,
     divergence_rows,
     divergence_to_reference,
+    energy_coefficients,
     inverse2,
+    reference_energy,
     sub_vertices,
 )
 from .space import PROJECT_TOL, EquilibriumSpace, make_exact, rigid_motions
@@ -52,10 +53,11 @@ from .space import PROJECT_TOL, EquilibriumSpace, make_exact, rigid_motions
 CHUNK = 16384  # triangles per batched local inversion: bounds the temporaries (21 x 21 each)
 SET_TOL = 1e-10  # relative size of p or nu below which the contact state is left as it is (rounding)
 RESIDUAL_TOL = 1e-8  # relative residual of the condensed solve above which it is not trusted
-REFINE_STEPS, REFINE_TOL = 1, 1e-15  # iterative refinement of the condensed solve, until rounding
+REFINE_STEPS, REFINE_TOL = 3, 1e-15  # iterative refinement of the condensed solve, until rounding
 # correction solves of the final field's equilibrium residual, until it is below the exactness
-# step's threshold (eq.space.PROJECT_TOL; one solve takes 1e-10 to ~5e-14 at levels 3-5) or stalls
-CORRECTIONS = 3
+# step's threshold (eq.space.PROJECT_TOL) or stalls: one takes 1e-10 to ~5e-14 at levels 3-5 (nu =
+# 0.3); near incompressibility each gains ~3 orders (nu = 0.4999: 4e-2, 2e-5, 7e-9, ...)
+CORRECTIONS = 8
 
 
 def symmetric_product(L: sp.spmatrix, x: np.ndarray) -> np.ndarray:
@@ -151,7 +153,9 @@ class HybridSolver:
     advice = ("use the CVXPY path (EquilibriumModel, or solver='CLARABEL')",
               "use the CVXPY path (--solver CLARABEL)")
 
-    def __init__(self, space: EquilibriumSpace):
+    def __init__(self, space: EquilibriumSpace, closed_form: bool = True):
+        """``closed_form=False`` solves every triangle's local KKT system, none in closed form (an
+        independent route to the same solution, for tests)."""
         t0 = time.perf_counter()
         self.space = space
         sc = space.scales
@@ -183,7 +187,7 @@ class HybridSolver:
         self.tri_c = np.flatnonzero(on_face.any(1))
         # plain triangles: every edge slot free, none on a contact face or under a column; their
         # local problem is the reference element's, solved in closed form (_plain_setup)
-        plain = (self.ys[:, :12] >= 0).all(1) & ~on_face.any(1)
+        plain = (self.ys[:, :12] >= 0).all(1) & ~on_face.any(1) & closed_form
         plain[column_slots(space)[0]] = False
         self.plain = np.flatnonzero(plain)
         self.special = np.flatnonzero(~plain)  # the general local KKT systems
@@ -230,12 +234,11 @@ class HybridSolver:
         sp_, sc, t = self.space, self.space.scales, self.plain
         _, area = bary_gradients(sp_.X[t])
         A = np.stack([b.material.compliance for b in sp_.scene.bodies])[sp_.body[t]]
-        Ap = np.einsum("tai,tab,tbj->tij", sp_.piola[t], A, sp_.piola[t])
-        self.ap = np.stack([Ap[:, a, b] for a, b in SYM_PAIRS], 1) * (np.abs(area) / 3.0 * sc.stress**2 / sc.energy)[:, None]
+        self.ap = energy_coefficients(sp_.piola[t], A, np.abs(area)) * (sc.stress**2 / sc.energy)
         self.Hw_inv = np.empty((len(t), 9, 9))
         for lo in range(0, len(t), CHUNK):
             c = slice(lo, lo + CHUNK)
-            self.Hw_inv[c] = np.linalg.inv((self.ap[c] @ REF_ENERGY_DIVFREE.reshape(6, 81)).reshape(-1, 9, 9))
+            self.Hw_inv[c] = np.linalg.inv(reference_energy(self.ap[c], REF_ENERGY_DIVFREE))
         self.D = inverse2(sp_.coef[t])  # (n, 6, 2, 2): edge dofs of the reference parameters
 
     def _plain_base(self, c: slice, g: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -245,7 +248,7 @@ class HybridSolver:
         if g is None or not np.any(g):
             return np.zeros((n, 15)), np.zeros((n, 9))
         cp = divergence_to_reference(self.space.X[self.plain[c]], g) @ REF_DIV_PINV.T
-        mixed = (self.ap[c] @ REF_ENERGY_MIXED.reshape(6, 135)).reshape(-1, 9, 15)
+        mixed = (self.ap[c] @ REF_ENERGY_MIXED.reshape(6, 135)).reshape(-1, 9, 15)  # Z^T H^
         return cp, np.einsum("naj,nj->na", mixed, cp)
 
     def _plain_edges(self, c: slice, zr: np.ndarray) -> np.ndarray:
@@ -481,10 +484,10 @@ class HybridSolver:
         y = self.parameters(state)
         space, s = self.space, self.space.scales.stress
         last, done = np.inf, 0
-        for _ in range(CORRECTIONS):
+        while True:
             r = space.divergence_residual(space.vertex_values(s * y)) / s  # (n_T, 6), over s
             size = float(np.abs(r).max(initial=0.0))
-            if size <= PROJECT_TOL or size > 0.5 * last:
+            if size <= PROJECT_TOL or size > 0.5 * last or done == CORRECTIONS:
                 break
             r = self.balanced(r)
             sep, mu_of_y, n_mu = state["sep"], state["mu_of_y"], self.S.shape[0]
@@ -567,6 +570,7 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
         solver="fast", status="optimal", iterations=st.iterations, solve_time=t1 - t0, backend=st.backend,
         factorizations=st.factorizations, factor_time=st.factor_time, setup_time=hs.setup_time,
         warm_start="coarse level" if warm else "given", warm_start_time=t_warm, active=state["active"].reshape(n_c, 2),
-        corrections=corrections, post_time=t2 - t1, n_variables=space.n_y, n_equalities=6 * space.n_tri, n_inequalities=2 * n_c,
+        corrections=corrections, post_time=t2 - t1, n_variables=space.n_y, n_equalities=6 * space.n_tri,
+        n_inequalities=2 * n_c,
         objective=hs.objective(y_exact / s), multipliers={"opening": state["nu"].reshape(n_c, 2)},
         pinned=hs.pins, n_mu=hs.n_mu, nnz=hs.nnz, **post)

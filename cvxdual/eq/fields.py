@@ -35,6 +35,7 @@ class StressField:
     space: object | None = None
     column: np.ndarray | None = None
     slab: np.ndarray | None = None
+    bound: float | None = None  # a certified relative energy bound of the field, where known
 
     @classmethod
     def kinematic(cls, space, v: np.ndarray) -> StressField:

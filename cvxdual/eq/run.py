@@ -113,6 +113,14 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
     return sol
 
 
+def error_summary(e: dict, bounds: dict) -> dict:
+    """A solution's ``error`` entry from :func:`~cvxdual.eq.bounds.exact_errors` and its bounds."""
+    return {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
+            "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
+            "displacement_energy": e["displacement_a"], "rule": e["rule"],
+            "effectivity": bounds["error_bound"] / e["combined"] if e["combined"] > 0 else None}
+
+
 def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: SolverStats,
                 times: dict) -> Solution:
     """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma``, ``g`` and ``u``;
@@ -131,11 +139,7 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: 
     error = None
     t_err = time.perf_counter()
     if exact is not None:
-        e = exact_errors(space, sigma, v, exact, g=g)
-        error = {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
-                 "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
-                 "displacement_energy": e["displacement_a"],
-                 "effectivity": b["error_bound"] / e["combined"] if e["combined"] > 0 else None}
+        error = error_summary(exact_errors(space, sigma, v, exact, g=g), b)
     t4 = time.perf_counter()
     t_err = t4 - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)

@@ -80,11 +80,12 @@ class EquilibriumSpace:
     basis of triangle ``t`` is the reference basis mapped by ``piola[t]`` (``(n_T, 3, 3)``, Voigt)
     with edge coefficient blocks ``coef[t]`` (``(n_T, 6, 2, 2)``: the inverse edge-dof blocks, the
     face edges' ties merged in; :mod:`cvxdual.eq.element`); local slot ``i`` of ``t`` is raw parameter
-    ``dofs[t, i]``. Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) = ``Tm y +
-    z_fix``; vertex values ``sigma = P z = S y + sigma0`` (``S``: :attr:`stress_map`, built on
-    demand: the fast route never forms it); column values ``g = z[column_dofs]`` ``(n_col, 2)`` at both ends
-    of every column interval ``columns`` (indices into ``faces``; energy ``column_energy_blocks``). ``div``:
-    rows ``h_T div sigma`` with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the
+    ``dofs[t, i]``. Raw parameters ``z`` (``4 n_E`` edge dofs, then ``3 n_T`` bubbles) =
+    ``Tm y + z_fix``; vertex values ``sigma = P z = S y + sigma0`` (``P``: :attr:`raw_map`, ``S``:
+    :attr:`stress_map`, built on demand: the fast route never forms them); column values
+    ``g = z[column_dofs]`` ``(n_col, 2)`` at both ends of every column interval ``columns``
+    (indices into ``faces``; energy ``column_energy_blocks``). :attr:`div`: rows ``h_T div sigma``
+    with right-hand side ``div_rhs = -h_T F``. ``contact_y (n_c, 2)``: the
     ``y`` index of the vertical stress at both ends of each contact edge (``contact_x (n_c, 2)``).
     """
 
@@ -151,7 +152,7 @@ class EquilibriumSpace:
         return self.local_basis()
 
     @cached_property
-    def P(self) -> sp.csr_matrix:
+    def raw_map(self) -> sp.csr_matrix:
         """``P``: vertex values ``(27 n_T)`` of the raw parameters (the CVXPY model's map)."""
         return self.vertex_map()
 
@@ -171,7 +172,7 @@ class EquilibriumSpace:
 
     @cached_property
     def stress_map(self) -> sp.csr_matrix:
-        return (self.P @ self.Tm).tocsr()
+        return (self.raw_map @ self.Tm).tocsr()
 
     @property
     def sigma0(self) -> np.ndarray:

@@ -43,11 +43,11 @@ REQUIRED = tuple(ROW_TYPES)
 IDENTITY = ("study", "case", "group", "scene", "overrides", "units", "triangulation", "stress_space", "level",
             "solver", "reference")  # a row of this case: these columns are its base_row's
 NUMERIC = {"h_min", "h_ratio", "iterations", "duality_gap", "contact_x_min", "contact_x_max", "peak_pressure",
-           "total_force", "peak_mb", "reference_error_est", "edge_error_share"}
+           "total_force", "peak_mb", "reference_error_est", "edge_error_share", "effectivity", "bound_energy_rel"}
 NUMERIC_PREFIXES = ("error_", "res_", "t_", "n_")
 MEASURED = {"error_l2": NUM, "error_l2_rel": NUM, "error_energy_rel": NUM, "reference_error_est": NUM}
 INFO_TYPES = {"level": INT, "triangulation": TEXT, "solver": TEXT, "n_pieces": INT, "d_last": NUM,
-              "d_before": NUM, "rate": MAYBE, "error_est": NUM}
+              "d_before": NUM, "rate": MAYBE, "error_est": NUM, "stress_space": TEXT, "certified": MAYBE}
 
 
 def _typed(d: dict, types: dict) -> bool:
@@ -86,11 +86,13 @@ def load_saved_stress(cache: Cache, key: str, n_pieces) -> dict | None:
 
 def load_reference_info(cache: Cache, key: str, ref: Reference) -> dict | None:
     """A reference's cached info (:func:`reference_info_task`), or ``None``: of this reference
-    (level, triangulation, solver), with its types and non-negative differences."""
+    (level, triangulation, solver, stress space), with its types and non-negative differences."""
     def ok(info: dict) -> bool:
+        this = (ref.level, ref.triangulation, ref.solver, ref.stress_space)
         return (_typed(info, INFO_TYPES) and info["n_pieces"] > 0
-                and (info["level"], info["triangulation"], info["solver"]) == (ref.level, ref.triangulation, ref.solver)
-                and min(info["d_last"], info["d_before"], info["error_est"]) >= 0)
+                and (info["level"], info["triangulation"], info["solver"], info["stress_space"]) == this
+                and min(info["d_last"], info["d_before"], info["error_est"]) >= 0
+                and (info["certified"] is None or info["certified"] >= 0))
     return cache.get_row(key, check=ok)
 
 
@@ -105,6 +107,14 @@ def load_reference_stress(cache: Cache, key: str, n_pieces: int) -> np.ndarray |
     return None if hit is None else hit["stress"]
 
 
+def load_eq_reference(cache: Cache, key: str, n_tri: int, n_col: int) -> dict | None:
+    """An equilibrium reference's cached vertex values ``(3 n_T, 3, 3)``, column values ``(n_col, 2)``
+    and certified relative energy bound ``(1,)``, or ``None``."""
+    shapes = {"stress": (3 * n_tri, 3, 3), "column": (n_col, 2), "bound": (1,)}
+    return cache.get_arrays(key, shapes, check=lambda a: usable_reference(a["stress"]) and
+                            bool(np.all(np.isfinite(a["column"]))) and a["bound"][0] >= 0)
+
+
 def scene_of(source: str, overrides: tuple, units: tuple | None):
     """The scene of a case: source with overrides applied, converted to ``units``."""
     from .. import load_scene
@@ -117,7 +127,8 @@ def scene_of(source: str, overrides: tuple, units: tuple | None):
 
 
 def field_key(scene_repr: str, ref: Reference, level: int) -> str:
-    return "f" + content_key("field", scene_repr, ref.triangulation, ref.solver, level, code_version())
+    return "f" + content_key("field", scene_repr, ref.triangulation, ref.solver, ref.stress_space, level,
+                             code_version())
 
 
 def reference_key(scene_repr: str, ref: Reference, metrics: tuple) -> str:
@@ -147,31 +158,73 @@ _MEMO: dict = {}  # the last reference field this process loaded: {key: Field}
 def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool = True,
                     ensure_cached: bool = False) -> tuple[Field, bool]:
     """The fast-path (or ``ref.solver``) solution at ``level``, from the memo, the cache, or solved
-    (and then cached); ``(field, computed)``. With ``ensure_cached``, a field taken from the memo
-    is written again if its cache entry does not load (other workers read it there)."""
+    (and then cached); ``(field, computed)``: a :class:`Field` (P0), or for an ``eq`` reference a
+    :class:`~cvxdual.eq.fields.StressField` with its certified relative energy bound in
+    ``bound``. With ``ensure_cached``, a field taken from the memo is written again if its cache
+    entry does not load (other workers read it there)."""
     from .. import discretize, solve
     key = field_key(repr(scene), ref, level)
     if key in _MEMO:
         f = _MEMO[key]
-        if ensure_cached and load_reference_stress(cache, key, len(f.stress)) is None:
-            cache.put_arrays(key, stress=f.stress)
+        if ensure_cached:
+            _recache(cache, key, f)
         return f, False
     mesh, pieces, _ = discretize(scene, ref.triangulation, level)
-    stress = load_reference_stress(cache, key, len(pieces))
-    computed = stress is None
-    if computed:
-        sol = solve(scene, ref.triangulation, level, ref.solver, check=True)
-        stress = np.asarray(sol.stress, float)
-        if not usable_reference(stress):
-            raise CvxdualError(f"the reference of scene {scene.name!r} ({ref.triangulation}, level {level}, "
-                               f"{ref.solver}) is zero everywhere or not finite: errors relative to it are "
-                               "undefined (is the scene loaded?)")
-        cache.put_arrays(key, stress=stress)
-    f = Field(scene, mesh, pieces, stress)
+    if ref.stress_space == "eq":
+        from ..eq.fields import StressField
+        from ..eq.space import EquilibriumSpace
+        space = EquilibriumSpace.from_pieces(mesh, pieces, ref.triangulation)
+        hit = load_eq_reference(cache, key, space.n_tri, len(space.columns))
+        computed = hit is None
+        if computed:
+            sol = solve(scene, ref.triangulation, level, ref.solver, stress_space="eq", check=True)
+            b = sol.bounds
+            hit = {"stress": np.asarray(sol.stress, float), "column": np.asarray(sol.column_stress, float),
+                   "bound": np.array([b["error_bound"] / np.sqrt(2.0 * b["complementary_energy"])])}
+            _check_usable(hit["stress"], scene, ref, level)
+            cache.put_arrays(key, **hit)
+        f = StressField(scene, mesh, pieces, hit["stress"], space, hit["column"], bound=float(hit["bound"][0]))
+    else:
+        stress = load_reference_stress(cache, key, len(pieces))
+        computed = stress is None
+        if computed:
+            sol = solve(scene, ref.triangulation, level, ref.solver, check=True)
+            stress = np.asarray(sol.stress, float)
+            _check_usable(stress, scene, ref, level)
+            cache.put_arrays(key, stress=stress)
+        f = Field(scene, mesh, pieces, stress)
     if keep:
         _MEMO.clear()
         _MEMO[key] = f
     return f, computed
+
+
+def _check_usable(stress: np.ndarray, scene, ref: Reference, level: int) -> None:
+    if not usable_reference(stress):
+        raise CvxdualError(f"the reference of scene {scene.name!r} ({ref.triangulation}, level {level}, "
+                           f"{ref.solver}) is zero everywhere or not finite: errors relative to it are "
+                           "undefined (is the scene loaded?)")
+
+
+def _recache(cache: Cache, key: str, f) -> None:
+    """Write a memo field back to the cache if its entry there does not load."""
+    if getattr(f, "space", None) is None:
+        if load_reference_stress(cache, key, len(f.stress)) is None:
+            cache.put_arrays(key, stress=f.stress)
+    elif load_eq_reference(cache, key, f.space.n_tri, len(f.space.columns)) is None:
+        cache.put_arrays(key, stress=f.stress, column=f.column, bound=np.array([f.bound]))
+
+
+def distance(a, b, n: int, n_fine: int) -> dict:
+    """``||a - b||`` over ``a``'s cells: :func:`cvxdual.p0.norms.stress_distance` between P0 fields
+    (as it always was), :func:`cvxdual.eq.fields.field_distance` where either is an equilibrium field."""
+    from ..eq.fields import StressField, field_distance
+    from ..p0.norms import stress_distance
+    if not any(isinstance(x, StressField) or getattr(x, "stress_space", "p0") == "eq" for x in (a, b)):
+        return stress_distance(a, b, n, n_fine)
+    as_field = [x if isinstance(x, StressField) else StressField.of(x) if hasattr(x, "stress_space")
+                else StressField(x.scene, x.mesh, x.pieces, x.stress) for x in (a, b)]
+    return field_distance(as_field[0], as_field[1], n, n_fine)
 
 
 def reference_level_task(source: str, overrides: tuple, units, ref: Reference, level: int, cache_root: str) -> dict:
@@ -184,8 +237,8 @@ def reference_level_task(source: str, overrides: tuple, units, ref: Reference, l
 
 def reference_info_task(source: str, overrides: tuple, units, ref: Reference, metrics: tuple, cache_root: str,
                         *levels_done) -> dict:
-    """Worker task: the reference's estimated error from the two levels below it (cached)."""
-    from ..p0.norms import stress_distance
+    """Worker task: the reference's estimated error from the two levels below it (cached), and for
+    an ``eq`` reference its certified relative energy bound (``certified``)."""
     scene = scene_of(source, overrides, units)
     cache = Cache(cache_root)
     key = reference_key(repr(scene), ref, metrics)
@@ -196,14 +249,15 @@ def reference_info_task(source: str, overrides: tuple, units, ref: Reference, me
     R = ref.level
     f2, _ = reference_field(scene, ref, R - 2, cache, keep=False)
     f1, _ = reference_field(scene, ref, R - 1, cache, keep=False)
-    d2 = stress_distance(f1, f2, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    d2 = distance(f1, f2, m["ref_rule"], m["ref_fine"])["l2_rel"]
     del f2
     f0, _ = reference_field(scene, ref, R, cache)
-    d1 = stress_distance(f0, f1, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    d1 = distance(f0, f1, m["ref_rule"], m["ref_fine"])["l2_rel"]
     p = float(np.log2(d2 / d1)) if d1 > 0 and d2 > d1 else float("nan")
     est = d1 / (2**p - 1) if np.isfinite(p) and p > 0 else d1
-    info = {"level": R, "triangulation": ref.triangulation, "solver": ref.solver, "n_pieces": len(f0.stress),
-            "d_last": d1, "d_before": d2, "rate": p, "error_est": est}
+    info = {"level": R, "triangulation": ref.triangulation, "solver": ref.solver,
+            "n_pieces": len(f0.pieces), "d_last": d1, "d_before": d2, "rate": p, "error_est": est,
+            "stress_space": ref.stress_space, "certified": getattr(f0, "bound", None)}
     return cache.put_row(key, info)
 
 
@@ -309,12 +363,24 @@ def solution_fields(sol) -> dict:
         "peak_pressure": c["max_pressure"], "total_force": c["total_force"],
         "n_patches": int(np.sum(np.diff(np.r_[0, active]) == 1)),
         **{f"t_{k}": float(v) for k, v in t.items()},
+        **_certificate(sol),
     }
+
+
+def _certificate(sol) -> dict:
+    """An equilibrium solution's certificate: the bound ``sqrt(2G)`` relative to the stress's
+    energy norm (it bounds the relative energy error of the stress and of the displacement) and
+    whether it is guaranteed."""
+    b = sol.bounds
+    if b is None:
+        return {}
+    norm = np.sqrt(2.0 * b["complementary_energy"]) if b["complementary_energy"] > 0 else np.nan
+    return {"bound_energy_rel": float(b["error_bound"] / norm), "guaranteed": bool(b["guaranteed"])}
 
 
 def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:
     from .. import exact_field
-    from ..p0.norms import stress_distance, stress_error
+    from ..p0.norms import stress_error
     m = dict(case.metrics)
     out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
            "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
@@ -324,10 +390,17 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
         if ex is None:
             if sol.error is None:
                 return out  # no exact field: nothing to measure (e.g. a stability case on blocks)
-        if sol.error is not None and (sol.stress_space == "eq" or sol.error.get("rule") == m["rule"]):
-            err = sol.error  # eq solutions' errors come with their own (exact) integration
+        if sol.error is not None and sol.error.get("rule") == m["rule"]:
+            err = sol.error
+        elif sol.stress_space == "eq":  # the study's rule, per sub-triangle and slab
+            from ..eq.bounds import exact_errors
+            from ..eq.run import error_summary
+            err = error_summary(exact_errors(sol.space, sol.stress, sol.displacement, ex, n=m["rule"],
+                                             g=sol.column_stress), sol.bounds)
         else:
             err = stress_error(sol.system, sol.stress, ex.stress, m["rule"])
+        if sol.stress_space == "eq":
+            out.update(error_combined=err["combined"], effectivity=err["effectivity"])
         if case.check_rule:
             out["error_l2_rel_finer_rule"] = stress_error(sol.system, sol.stress, ex.stress,
                                                           m["check_rule"])["l2_rel"]
@@ -338,10 +411,11 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
         if ref_info is None:
             raise StudyError("internal: a finer-level reference without its info")
         field, _ = reference_field(scene, ref, ref.level, cache)
-        err = stress_distance(field, sol, m["ref_rule"], m["ref_fine"])
+        err = distance(field, sol, m["ref_rule"], m["ref_fine"])
+        if sol.stress_space == "eq":
+            out.update(_combined(field, sol, err, m))
         if case.check_rule:
-            out["error_l2_rel_finer_rule"] = stress_distance(field, sol, m["ref_check_rule"],
-                                                             m["ref_check_fine"])["l2_rel"]
+            out["error_l2_rel_finer_rule"] = distance(field, sol, m["ref_check_rule"], m["ref_check_fine"])["l2_rel"]
         out["reference_error_est"] = ref_info["error_est"]
     else:
         return out
@@ -352,6 +426,17 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
     out.update(error_l2=err["l2"], error_l2_rel=err["l2_rel"], error_energy=err["energy"],
                error_energy_rel=err["energy_rel"])
     return out
+
+
+def _combined(field, sol, err: dict, m: dict) -> dict:
+    """What the certificate bounds, measured against the reference ``lam*``: the combined error
+    ``sqrt(||sigma - lam*||_A^2 + ||lam* - C e(v)||_A^2)`` (``= ||u - v||_a`` for the second term)
+    of an equilibrium solution, and the effectivity ``sqrt(2G)`` over it."""
+    from ..eq.fields import StressField
+    kin = distance(field, StressField.kinematic(sol.space, sol.displacement), m["ref_rule"], m["ref_fine"])
+    combined = float(np.hypot(err["energy"], kin["energy"]))
+    return {"error_combined": combined,
+            "effectivity": sol.bounds["error_bound"] / combined if combined > 0 else np.nan}
 
 
 def edge_share(sol, ex, rule: int) -> float:

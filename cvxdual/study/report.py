@@ -248,13 +248,17 @@ def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
             how = "no reference"
         elif label in refs:
             r = refs[label]
+            eq = r.get("stress_space") == "eq"
             how = (f"against a reference: {r['triangulation'].replace('type', 'type ')}, level {r['level']} "
-                   f"({r['n_pieces']} pieces), {'fast path' if r.get('solver') == 'fast' else r.get('solver')}, "
+                   f"({r['n_pieces']} pieces), " + ("equilibrium stresses, " if eq else "")
+                   + f"{'fast path' if r.get('solver') == 'fast' else r.get('solver')}, "
                    f"{_metric(df, 'ref_rule', 2)}x{_metric(df, 'ref_rule', 2)} points per reference piece "
                    f"({_metric(df, 'ref_fine', 6)}x{_metric(df, 'ref_fine', 6)} on those straddling studied "
                    f"pieces); its estimated relative error is {_num(r.get('error_est'), '.2g')} (last "
                    f"differences {_num(r.get('d_before'), '.3g')}, {_num(r.get('d_last'), '.3g')}, "
-                   f"rate {_num(r.get('rate'), '.2f')})")
+                   f"rate {_num(r.get('rate'), '.2f')})"
+                   + (f"; certified by its bounds: relative energy error at most {_num(r.get('certified'), '.2g')} "
+                      "(with the displacement's error)" if eq else ""))
         else:
             how = f"against a reference ({ref})"
         out.append(f"- `{label}`: levels {min(levels)}-{max(levels)}{size}; {how}.")

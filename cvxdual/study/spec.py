@@ -9,8 +9,9 @@ A spec is a table (a TOML file, or the ``SPEC`` dict of a Python file) of
   names, ``"fast"``, or ``"limit"``: one factorisation of the stiffness), lists;
 - ``set``: a grid of ``--set`` overrides, ``{"dotted.key" = [value, ...]}`` (product over keys);
 - ``reference``: ``"exact"`` (the scene's closed-form field), ``"none"``, or a finer level
-  ``{level = 7}`` / ``{levels_above = 2}`` (``triangulation = "type2"`` and ``solver = "fast"``
-  by default), solved once per scene variant;
+  ``{level = 7}`` / ``{levels_above = 2}`` (``triangulation = "type2"``, ``solver = "fast"`` and
+  ``stress_space = "p0"`` by default; ``"eq"``: the exactly admissible field, with its certified
+  bound), solved once per scene variant;
 - ``metrics``: quadrature rules (``rule``, ``check_rule``, ``ref_rule``, ``ref_fine``,
   ``ref_check_rule``, ``ref_check_fine``), ``check = "finest"|"all"|"none"`` (where the finer
   rule is also applied), ``edge_share`` (Hertz scenes: error share near the contact edges);
@@ -69,9 +70,12 @@ class Reference:
     level: int | None = None
     triangulation: str = "type2"
     solver: str = "fast"
+    stress_space: str = "p0"  # of the finer solution: "eq" gives an exactly admissible reference
 
     def label(self) -> str:
-        return self.kind if self.kind != "finer" else f"{self.triangulation} level {self.level}"
+        if self.kind != "finer":
+            return self.kind
+        return f"{self.triangulation} level {self.level}" + (" eq" if self.stress_space == "eq" else "")
 
 
 @dataclass(frozen=True)
@@ -311,10 +315,8 @@ def load_spec(source, quick: bool = False) -> Study:
             raise StudyError("study spec: 'compare' takes two or more solvers, the last the reference, e.g. "
                              "compare = [\"CLARABEL\", \"fast\"]")
         compare = tuple(_solver(s) for s in compare)
-        if any(c.stress_space != "p0" for c in cases):
-            raise StudyError("study spec: 'compare' compares P0 stresses of two paths; it does not take "
-                             "stress_spaces = [\"eq\"]")
-        cases = [c if c.solver not in compare else _with(c, save_stress=True) for c in cases]
+        # the P0 stresses of two paths are compared; eq rows (one path) are left out
+        cases = [_with(c, save_stress=True) if c.solver in compare and c.stress_space == "p0" else c for c in cases]
     return Study(name=name, title=raw.get("title", name), description=raw.get("description", ""), cases=cases,
                  path=path, quick=quick, raw=raw, hooks_path=hooks_path, measure=measure,
                  report_hook=getattr(mod, "report", None) if mod is not None else None, compare=compare,
@@ -338,10 +340,10 @@ def _reference(v, levels: list[int], where: str) -> Reference:
     if v == "none":
         return Reference("none")
     if isinstance(v, dict):
-        bad = set(v) - {"level", "levels_above", "triangulation", "solver"}
+        bad = set(v) - {"level", "levels_above", "triangulation", "solver", "stress_space"}
         if bad:
             raise StudyError(f"study spec {where}: unknown reference key {sorted(bad)[0]!r}; allowed: level, "
-                             "levels_above, triangulation, solver")
+                             "levels_above, triangulation, solver, stress_space")
         if "level" in v:
             level = v["level"]
         else:
@@ -355,7 +357,11 @@ def _reference(v, levels: list[int], where: str) -> Reference:
         tri = v.get("triangulation", "type2")
         if tri not in TRIANGULATIONS:
             raise StudyError(f"study spec {where}: reference triangulation {tri!r}; use type1 or type2")
-        return Reference("finer", level, tri, _solver(v.get("solver", "fast")))
+        space = v.get("stress_space", "p0")
+        if space not in STRESS_SPACES:
+            raise StudyError(f"study spec {where}: reference stress space {space!r}; use one of "
+                             f"{', '.join(STRESS_SPACES)}")
+        return Reference("finer", level, tri, _solver(v.get("solver", "fast")), space)
     raise StudyError(f"study spec {where}: reference must be \"exact\", \"none\" or a table {{level = N}}")
 
 
@@ -412,9 +418,6 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             raise StudyError(f"study spec {w}: levels must be a list of integers >= 0, e.g. levels = [0, 1, 2]")
         levels = sorted(set(levels))
         ref = _reference(entry.get("reference", d.get("reference")), levels, w)
-        if "eq" in spaces and ref.kind == "finer":
-            raise StudyError(f"study spec {w}: stress space eq is measured against an exact field only "
-                             "(reference = \"exact\" or \"none\"), not a finer P0 level")
         sgrid = {**grid, **(entry.get("set") or {})}
         axes = [[(k, v) for v in _list(vals, f"set.{k}", w)] for k, vals in sgrid.items()]
         fixed = _fixed_overrides(d.get("overrides"), w)

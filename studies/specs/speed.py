@@ -32,6 +32,12 @@ HERTZ_SHARP = {"mesh": {"grading": 50.0, "focus": [0.0, 7.0], "columns": 6},
                "bodies": {"cylinder": {"focus_depth": 6.0, "layers": 5}, "block": {"focus_depth": 6.0, "layers": 5}}}
 
 
+EQ_SCENES = ["hertz", "cylinder-on-block"]  # flat and curved faces
+EQ_LEVELS = [3, 4, 5, 6]  # 9e3 to 6e5 triangles
+EQ_RULE_LEVEL = 5  # where the eq errors' quadrature rules are compared (hertz, 1.5e5 triangles)
+EQ_RULES = (2, 3, 4, 6, 8)
+
+
 def _installed() -> list[str]:
     import cvxpy as cp
     have = set(cp.installed_solvers())
@@ -82,6 +88,10 @@ SPEC = {
         # (the default set, and with the figures, --plots)
         {"name": "cli", "tags": {"part": "cli"}, "scenes": [SCAN_SCENE], "levels": [0, 1, 2, 6],
          "solvers": ["fast"], "timeout": CVXPY_TIMEOUT, "quick": {"levels": [0, 1]}},
+        # the equilibrium route (space, solve, exactness, bounds) against the P0 fast path, same meshes
+        {"name": "eq", "tags": {"part": "eq"}, "scenes": EQ_SCENES, "stress_spaces": ["p0", "eq"],
+         "triangulations": ["type2"], "levels": EQ_LEVELS, "solvers": ["fast"], "reference": "none",
+         "timeout": CVXPY_TIMEOUT, "quick": {"levels": [1, 2]}},
         {"name": "profile", "tags": {"part": "profile"}, "scenes": [SCAN_SCENE],
          "overrides": {"mesh": {"columns": SCAN_COLUMNS}}, "levels": [6], "solvers": ["fast"], "profile": True,
          "quick": {"levels": [2]}},
@@ -115,7 +125,30 @@ def measure(case, sol) -> dict:
         return _small(case, sol)
     if part == "cli":
         return _cli(case)
+    if part == "eq" and case.stress_space == "eq":
+        out = {f"n_{k}": v for k, v in (("factorizations", sol.solver.get("factorizations")),
+                                        ("corrections", sol.solver.get("corrections")),
+                                        ("iterations_eq", sol.solver.get("iterations")),
+                                        ("mu", sol.solver.get("n_mu"))) if v is not None}
+        out.update(t_factor_eq=sol.solver.get("factor_time"))
+        if case.level == EQ_RULE_LEVEL and sol.exact is not None:
+            out.update(_eq_rules(sol))
+        return out
     return {}
+
+
+def _eq_rules(sol) -> dict:
+    """The eq errors against the exact field with each rule per sub-triangle (``EQ_QUAD`` is the default)."""
+    from cvxdual import exact_field
+    from cvxdual.eq.bounds import exact_errors
+    ex = exact_field(sol.scene)
+    out = {}
+    for n in EQ_RULES:
+        t0 = time.perf_counter()
+        e = exact_errors(sol.space, sol.stress, sol.displacement, ex, n=n, g=sol.column_stress)
+        out[f"eqrule{n}_s"] = time.perf_counter() - t0
+        out.update({f"eqrule{n}_{k}": e[k] for k in ("l2_rel", "combined")})
+    return out
 
 
 RULE_LEVEL = 5  # the scan level at which the quadrature rules are compared (2.5e5 pieces)
@@ -215,12 +248,12 @@ def report(df: pd.DataFrame, study, out) -> str:
     from cvxdual.study.report import md_table
     d = _paths(df)
     scan, pareto, solv, small, cli = (d[d.part == p] for p in ("scan", "pareto", "solvers", "small", "cli"))
-    prof = d[d.part == "profile"]
+    prof, eq = d[d.part == "profile"], d[d.part == "eq"]
     if out is not None:
         _plots(scan, pareto, out)
     lines = [
         "Plots: `speed_scaling.png`, `speed_pareto.png`.", "",
-        "## Targets", "", md_table(pd.DataFrame(_targets(scan, pareto, small, cli))), "",
+        "## Targets", "", md_table(pd.DataFrame(_targets(scan, pareto, small, cli) + _eq_target(eq))), "",
         "Time to accuracy against other finite element codes: `peers.md`.", "",
         f"## The small end (`{SCAN_SCENE}`, its default mesh)", "",
         "`first solve` is the fast path's solve phase in a fresh process right after `import cvxdual` (what "
@@ -242,6 +275,7 @@ def report(df: pd.DataFrame, study, out) -> str:
         "## Where the time goes (profile of the largest fast-path run)", "", "```",
         _trim_profile(str(prof["_profile"].iloc[0]) if len(prof) and isinstance(prof["_profile"].iloc[0], str)
                       else ""), "```", "",
+        *_eq_lines(eq),
         "## Error against wall time", "",
         "Both triangulations, graded (the scene's own) and uniform meshes, both paths; `hertz` also with a sharply "
         "graded mesh. `cylinder-in-groove` is measured against a type 2 reference two levels finer (as in the "
@@ -361,6 +395,59 @@ def _targets(scan: pd.DataFrame, pareto: pd.DataFrame, small: pd.DataFrame, cli:
     else:
         out.append({"target": target, "measured": "no run reached 1%", "met": "no"})
     return out
+
+
+def _eq_table(eq: pd.DataFrame) -> pd.DataFrame:
+    """P0 fast path and eq route side by side: whole runs, the eq phases, factorisations, memory."""
+    ok = eq[_ok(eq)]
+    p0 = ok[ok.stress_space == "p0"].set_index(["scene", "level"])
+    q = ok[ok.stress_space == "eq"].set_index(["scene", "level"])
+    t = pd.DataFrame({"pieces": p0["n_pieces"], "p0 s": p0["t_total"], "eq s": q["t_total"],
+                      "eq / p0": q["t_total"] / p0["t_total"], "eq assemble s": q.get("t_assemble"),
+                      "eq solve s": q.get("t_solve"), "of it factorising s": q.get("t_factor_eq"),
+                      "factorisations": q.get("n_factorizations"), "eq recover s": q.get("t_recover"),
+                      "unknowns of S": q.get("n_mu"), "p0 MB": p0.get("peak_mb"), "eq MB": q.get("peak_mb")})
+    return t.reset_index().dropna(axis=1, how="all")
+
+
+def _eq_target(eq: pd.DataFrame) -> list[dict]:
+    t = _eq_table(eq)
+    big = t[t.pieces >= 1e5] if len(t) else t
+    if not len(big):
+        return []
+    return [{"target": "eq run (mesh to bounds) <= 4 x the P0 fast path at the same level, from 1e5 pieces up",
+             "measured": ", ".join(f"{r['eq / p0']:.1f} ({r.scene}, {int(r.pieces)} pieces)"
+                                   for _, r in big.iterrows()),
+             "met": "yes" if big["eq / p0"].max() <= 4 else "no"}]
+
+
+def _eq_lines(eq: pd.DataFrame) -> list[str]:
+    from cvxdual.study.report import md_table
+    if not len(eq):
+        return []
+    lines = ["## The equilibrium route against the P0 fast path", "",
+             "Type 2, the scene's own mesh, one process and one thread per run, all in one run: `p0` is the P0 fast "
+             "path (mesh, assembly, active set, recovery, and the error where the scene has an exact field); `eq` "
+             "is the whole equilibrium run on the same mesh: that P0 solve (its displacement is the certificate's "
+             "kinematic side), the equilibrium space, its active-set solve on the condensed system `S` "
+             "(`unknowns of S`: about 6 a triangle, against 1 a triangle for the P0 stiffness), the correction "
+             "solve that makes the field exact, the certified bounds and the error. `factorising` is the time "
+             "CHOLMOD spends on `S` (symbolic and numeric) for the `factorisations` the active set needed.", "",
+             md_table(_eq_table(eq)), ""]
+    r = eq[(eq.stress_space == "eq") & _ok(eq) & eq.get("eqrule2_s", pd.Series(dtype=float)).notna()] \
+        if "eqrule2_s" in eq else eq.iloc[:0]
+    if len(r):
+        r = r.iloc[0]
+        rows = [{"points per sub-triangle": n * n, "l2_rel": r[f"eqrule{n}_l2_rel"],
+                 "change against 8x8": r[f"eqrule{n}_l2_rel"] / r["eqrule8_l2_rel"] - 1,
+                 "combined": r[f"eqrule{n}_combined"],
+                 "change of combined": r[f"eqrule{n}_combined"] / r["eqrule8_combined"] - 1,
+                 "seconds": r[f"eqrule{n}_s"], "default": "yes" if n == 3 else ""} for n in EQ_RULES]
+        lines += [f"### The quadrature rules' own error (eq, `{r.scene}` level {int(r.level)})", "",
+                  "The eq stresses' relative L2 error and the combined error (what the bound dominates) against the "
+                  "exact field with collapsed Gauss rules of n x n points per sub-triangle; the solve reports the "
+                  "default rule's figures.", "", md_table(pd.DataFrame(rows)), ""]
+    return lines
 
 
 def _small_table(small: pd.DataFrame, cli: pd.DataFrame) -> pd.DataFrame:
