@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT / "studies"))
 # Hypothesis keeps its example database and constants under .hypothesis/ of the working directory
 HYPOTHESIS_HOME = tempfile.mkdtemp(prefix="cvxdual-tests-hypothesis-")
 set_hypothesis_home_dir(HYPOTHESIS_HOME)
-LEFT_ALONE = ("__pycache__", ".venv")  # Python's bytecode cache; the environment the tests run in
+LEFT_ALONE = ("__pycache__", ".venv", ".ruff_cache")  # bytecode and lint caches; the environment the tests run in
 _BEFORE = pytest.StashKey[set | None]()
 
 
