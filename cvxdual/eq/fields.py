@@ -95,36 +95,63 @@ class StressField:
             cell[cu] = -1 - slab
         return out, cell
 
-    def rule(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """A quadrature of the field: points, weights, body, values ``(m, 3)`` and cell (as
-        :meth:`at`), with ``n*n`` Gauss points per piece (``p0``) or per sub-triangle and slab (``eq``)."""
+    def cells(self) -> np.ndarray:
+        """Every cell of the field, numbered as :meth:`at` returns them (pieces; or sub-triangles
+        ``3 t + i`` and ``-1 - slab`` on the curved pieces)."""
         if self.space is None:
             if self.slab is None:
-                pts, w, idx = self.pieces.quadrature(n)
+                return np.arange(len(self.pieces))
+            return np.concatenate([np.flatnonzero(self.pieces.kind == 0), -1 - np.arange(len(self.slab))])
+        return np.concatenate([np.arange(3 * self.space.n_tri), -1 - np.arange(len(self.space.pieces.slabs))])
+
+    def rule(self, n: int, cells: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+        """A quadrature of the field: points, weights, body, values ``(m, 3)`` and cell (as
+        :meth:`at`), with ``n*n`` Gauss points per piece (``p0``) or per sub-triangle and slab
+        (``eq``); on the ``cells`` of :meth:`cells` only, if given."""
+        straight = slabs = None  # None: all
+        if cells is not None:
+            cells = np.asarray(cells, int)
+            straight, slabs = cells[cells >= 0], -1 - cells[cells < 0]
+        if self.space is None:
+            if self.slab is None:
+                only = None if straight is None else _mask(straight, len(self.pieces))
+                pts, w, idx = self.pieces.quadrature(n, only=only)
                 return pts, w, self.pieces.body[idx].astype(int), self.stress[idx], idx
-            pts, w, idx = self.pieces.quadrature(n, only=self.pieces.kind == 0)
-            spt, sw, si = self.pieces.slab_quadrature(n)
+            only = self.pieces.kind == 0
+            if straight is not None:
+                only &= _mask(straight, len(self.pieces))
+            pts, w, idx = self.pieces.quadrature(n, only=only)
+            spt, sw, si = self.pieces.slab_quadrature(n, None if slabs is None else _mask(slabs, len(self.slab)))
             return (np.concatenate([pts, spt]), np.concatenate([w, sw]),
                     np.concatenate([self.pieces.body[idx], self.pieces.slabs.body[si]]).astype(int),
                     np.concatenate([self.stress[idx], self.slab[si]]), np.concatenate([idx, -1 - si]))
         sp = self.space
+        sub = np.arange(3 * sp.n_tri) if straight is None else straight
         rs, wr = triangle_rule(n)
         lam = np.stack([1 - rs.sum(1), rs[:, 0], rs[:, 1]], 1)
-        P = sp.sub_points()
+        P = sp.sub_points()[sub]
         _, area = bary_gradients(P)
         pts = np.einsum("qa,sai->sqi", lam, P).reshape(-1, 2)
         w = (2.0 * area[:, None] * wr[None, :]).ravel()
-        vals = np.einsum("qa,sai->sqi", lam, self.stress.reshape(-1, 3, 3)).reshape(-1, 3)
-        cell = np.repeat(np.arange(len(P)), len(wr))
-        body = np.repeat(np.repeat(sp.body, 3), len(wr))
-        if len(sp.pieces.slabs):
-            spt, sw, si = sp.pieces.slab_quadrature(n)
+        vals = np.einsum("qa,sai->sqi", lam, self.stress.reshape(-1, 3, 3)[sub]).reshape(-1, 3)
+        cell = np.repeat(sub, len(wr))
+        body = np.repeat(sp.body[sub // 3], len(wr))
+        n_slabs = len(sp.pieces.slabs)
+        if n_slabs and (slabs is None or len(slabs)):
+            spt, sw, si = sp.pieces.slab_quadrature(n, None if slabs is None else _mask(slabs, n_slabs))
             g, _ = column_at(sp, self.column, None, spt, si)
             pts, w = np.concatenate([pts, spt]), np.concatenate([w, sw])
             vals = np.concatenate([vals, np.stack([np.zeros(len(g)), g, np.zeros(len(g))], 1)])
             cell = np.concatenate([cell, -1 - si])
             body = np.concatenate([body, sp.pieces.slabs.body[si].astype(int)])
         return pts, w, body, vals, cell
+
+
+def _mask(idx: np.ndarray, n: int) -> np.ndarray:
+    m = np.zeros(n, bool)
+    m[idx] = True
+    return m
 
 
 def _offsets(V: np.ndarray) -> np.ndarray:
@@ -156,31 +183,40 @@ def column_at(space, g: np.ndarray, piece: np.ndarray | None, pts: np.ndarray,
     return g[col, 0] * (1 - t) + g[col, 1] * t, slab
 
 
+CHUNK_POINTS = 2_000_000  # quadrature points per pass of field_distance: ~1 GB of temporaries
+
+
 def field_distance(a: StressField, b: StressField, n: int = 3, n_fine: int | None = 8) -> dict:
     """``||sigma_a - sigma_b||`` (L2 and energy) integrated over ``a``'s cells (``n*n`` points each),
     every point evaluated in ``b``; relative measures are against ``a`` (integrate over the finer
     field). A cell of ``a`` whose points fall in several cells of ``b`` (the meshes are not nested:
-    the integrand jumps inside it) is integrated again with ``n_fine*n_fine`` points."""
+    the integrand jumps inside it) is integrated again with ``n_fine*n_fine`` points. The cells
+    are taken in chunks of about :data:`CHUNK_POINTS` points (a level-6 reference has millions)."""
     tol = 1e-10 * a.scene.length_scale  # Gauss points are interior; rounding where the faces coincide
-    pts, w, body, va, cell = a.rule(n)
-    vb, cb = b.at(pts, body, tol)
-    if n_fine is not None:
-        cells, first, inv = np.unique(cell, return_index=True, return_inverse=True)
-        straddles = np.zeros(len(cells), bool)
-        np.logical_or.at(straddles, inv, cb != cb[first][inv])  # a point in another host than the first
-        bad = cells[straddles]
-        if len(bad):
-            fp, fw, fb, fv, fc = a.rule(n_fine)
-            keep_f = np.isin(fc, bad)
-            keep = ~np.isin(cell, bad)
-            fvb, _ = b.at(fp[keep_f], fb[keep_f], tol)
-            w, body, va, vb = (np.concatenate([x[keep], y]) for x, y in
-                               ((w, fw[keep_f]), (body, fb[keep_f]), (va, fv[keep_f]), (vb, fvb)))
-    A = np.stack([bd.material.compliance for bd in a.scene.bodies])[body]
-    d = va - vb
-    l2 = np.sqrt(np.sum(w * np.einsum("mi,mi,i->m", d, d, VOIGT_WEIGHT)))
-    ref = np.sqrt(np.sum(w * np.einsum("mi,mi,i->m", va, va, VOIGT_WEIGHT)))
-    en = np.sqrt(np.sum(w * np.einsum("mi,mij,mj->m", d, A, d)))
-    ref_en = np.sqrt(np.sum(w * np.einsum("mi,mij,mj->m", va, A, va)))
+    A_body = np.stack([bd.material.compliance for bd in a.scene.bodies])
+    sums = np.zeros(4)  # |d|^2, |a|^2 in L2; d:A d, a:A a
+    cells = a.cells()
+    per = max(1, CHUNK_POINTS // max(n, n_fine or n) ** 2)
+    for lo in range(0, len(cells), per):  # chunks of cells, each pass vectorised
+        chunk = cells[lo:lo + per]
+        pts, w, body, va, cell = a.rule(n, chunk)
+        vb, cb = b.at(pts, body, tol)
+        if n_fine is not None:
+            ids, first, inv = np.unique(cell, return_index=True, return_inverse=True)
+            straddles = np.zeros(len(ids), bool)
+            np.logical_or.at(straddles, inv, cb != cb[first][inv])  # a point in another host than the first
+            bad = ids[straddles]
+            if len(bad):
+                keep = ~np.isin(cell, bad)
+                fp, fw, fb, fv, _ = a.rule(n_fine, bad)
+                fvb, _ = b.at(fp, fb, tol)
+                w, body, va, vb = (np.concatenate([x[keep], y]) for x, y in
+                                   ((w, fw), (body, fb), (va, fv), (vb, fvb)))
+        d = va - vb
+        A = A_body[body]
+        sums += [np.sum(w * np.einsum("mi,mi,i->m", d, d, VOIGT_WEIGHT)),
+                 np.sum(w * np.einsum("mi,mi,i->m", va, va, VOIGT_WEIGHT)),
+                 np.sum(w * np.einsum("mi,mij,mj->m", d, A, d)), np.sum(w * np.einsum("mi,mij,mj->m", va, A, va))]
+    l2, ref, en, ref_en = np.sqrt(sums)
     return {"l2": float(l2), "l2_rel": float(l2 / ref) if ref > 0 else float("nan"), "energy": float(en),
             "energy_rel": float(en / ref_en) if ref_en > 0 else float("nan")}
