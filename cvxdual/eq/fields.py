@@ -19,7 +19,7 @@ from ..errors import CvxdualError
 from ..geometry.locate import locate
 from ..geometry.quadrature import triangle_rule
 from ..voigt import VOIGT_WEIGHT
-from .element import bary_gradients, sub_vertices
+from .element import bary_gradients
 
 
 @dataclass(frozen=True)
@@ -80,11 +80,20 @@ class StressField:
         st = np.flatnonzero(loc < n_straight)
         if len(st):
             t = loc[st]
-            V = sub_vertices(sp.X[t])  # (m, 3, 3, 2): the three sub-triangles (X_i, X_i+1, c)
-            # the sub-triangle holding the point: the largest of its barycentric coordinate at c
-            lam = np.einsum("msaj,mj->msa", bary_gradients(V)[0], pts[st]) + _offsets(V)
-            i = np.argmax(lam[:, :, 2] + 1e9 * (lam.min(2) >= -1e-12), axis=1)
-            li = lam[np.arange(len(st)), i]  # (m, 3) barycentric in its sub-triangle
+            # barycentric coordinates in the macro triangle; the point lies in the sub-triangle
+            # (X_i, X_i+1, c) opposite the smallest one, lam_k (k = i + 2), where its own are
+            # (lam_i - lam_k, lam_i+1 - lam_k, 3 lam_k): x = sum lam_j X_j and c is the mean
+            X = sp.X[t]
+            d1, d2, p = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], pts[st] - X[:, 0]
+            det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+            l1 = (p[:, 0] * d2[:, 1] - p[:, 1] * d2[:, 0]) / det
+            l2 = (d1[:, 0] * p[:, 1] - d1[:, 1] * p[:, 0]) / det
+            lam = np.stack([1.0 - l1 - l2, l1, l2], 1)
+            k = np.argmin(lam, axis=1)
+            i = (k + 1) % 3
+            rows = np.arange(len(st))
+            lk = lam[rows, k]
+            li = np.stack([lam[rows, i] - lk, lam[rows, (i + 1) % 3] - lk, 3.0 * lk], 1)
             vals = self.stress.reshape(sp.n_tri, 3, 3, 3)[t, i]  # (m, 3 vertices, 3)
             out[st] = np.einsum("ma,mai->mi", li, vals)
             cell[st] = 3 * t + i
@@ -152,12 +161,6 @@ def _mask(idx: np.ndarray, n: int) -> np.ndarray:
     m = np.zeros(n, bool)
     m[idx] = True
     return m
-
-
-def _offsets(V: np.ndarray) -> np.ndarray:
-    """The constant terms of the barycentric functions of triangles ``V (..., 3, 2)``."""
-    g, _ = bary_gradients(V)
-    return 1.0 / 3.0 - np.einsum("...aj,...j->...a", g, V.mean(-2))
 
 
 def slab_of(pieces, piece: np.ndarray, pts: np.ndarray) -> np.ndarray:
