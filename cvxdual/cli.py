@@ -51,7 +51,9 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         lines.append(f"friction: Tresca g = {_fmt(sol.scene.friction.g)} {S}; {int(k['stick'].sum())} active pairs "
                      f"stick, {slipping} slip; largest tangential force {_fmt(np.abs(k['tangential_force']).max())} "
                      f"{S}*{L}")
-    for name, why in s["checks_skipped"].items():
+    skipped = dict(s["checks_skipped"])
+    no_error = skipped.pop("error", None)
+    for name, why in skipped.items():
         lines.append(f"not checked: {name} ({why})")
     if s["fallback"]:
         lines.append(f"note: {s['fallback']}")
@@ -62,6 +64,8 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         e = s["error"]
         lines.append(f"error against the exact stress: L2 {e['l2']:.3e} (relative {e['l2_rel']:.2e}), "
                      f"energy relative {e['energy_rel']:.2e}")
+    elif no_error:
+        lines.append(f"no error against the exact stress: {no_error}")
     if s["bounds"]:
         b = s["bounds"]
         lines.append(f"certified bounds: {b['energy_lower']:.6g} <= J(u) <= {b['energy_upper']:.6g}; "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from ..errors import SceneError
 from ..validate import integer, number, short, table, text
 from .materials import Material
 from .profiles import profile_from_dict
-from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
+from .scene import WHY, Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction, problem_entries
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
@@ -26,7 +27,7 @@ PART_KEYS = {"on", "kind", "traction", "interval"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
 CONTACT_KEYS = {"interval", "gap", "friction"}
 FRICTION_KEYS = {"kind", "g"}
-EXACT_KEYS = {"kind", "stress", "R", "load", "xc"}
+EXACT_KEYS = {"kind", "stress", "R", "load", "xc", "any_material"}
 MESH_KEYS = {"columns", "focus", "grading", "default_level"}
 TRACTION_KEYS = {"kind", "value"}
 
@@ -199,6 +200,7 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         seen = [f"built-in scene {str(source)!r}"]
     data = copy.deepcopy(data)
     chain = [name]
+    files = [data]  # the raw tables of the chain, outermost first
     while "base" in data:
         ref = data.pop("base")
         base, holder, name = _base_data(ref, holder, name)
@@ -207,13 +209,33 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         if key in seen:
             raise SceneError(f"scene bases form a cycle: {' -> '.join(chain)}; remove one of these base lines")
         seen.append(key)
+        files.append(base)
         data = merge(base, data)
     for o in overrides or []:
         _check_depth(o, "an override")
         if isinstance(o, dict) and "base" in o:
             raise SceneError("an override cannot change 'base'; start from the other scene instead")
         data = merge(data, table(o, "an override"))
-    return scene_from_dict(data)
+    scene = scene_from_dict(data)
+    # The exact field solves the scene of the outermost file with an [exact] table: a file that
+    # starts from that one, and the overrides, change the problem without making the field solve it.
+    at = next((i for i, f in enumerate(files) if "exact" in f), None)
+    if scene.exact is not None and at is not None and (at > 0 or overrides):
+        try:
+            declared = problem_entries(scene_from_dict(_merged(files[at:])))
+        except SceneError as e:
+            declared = ((WHY, f"the exact field is declared in {chain[at]}, which is not a valid scene on its "
+                               f"own ({e})"),)
+        scene = replace(scene, exact=replace(scene.exact, declared_for=declared))
+    return scene
+
+
+def _merged(files: list[dict]) -> dict:
+    """The table of a chain of raw scene tables (outermost first), merged as :func:`load_scene` does."""
+    data = {k: v for k, v in files[0].items() if k != "base"}
+    for base in files[1:]:
+        data = merge({k: v for k, v in base.items() if k != "base"}, data)
+    return data
 
 
 def _check_keys(d, allowed: set[str] | None, where: str) -> dict:
@@ -248,7 +270,7 @@ def scene_from_dict(data: dict) -> Scene:
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
         exact = ExactSpec(kind=text(_need(e, "kind", "exact"), "exact.kind"), stress=e.get("stress"), R=e.get("R"),
-                          load=e.get("load"), xc=e.get("xc", 0.0))
+                          load=e.get("load"), xc=e.get("xc", 0.0), any_material=e.get("any_material", False))
     m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
     mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
                     grading=number(m.get("grading", 1.0), "mesh.grading"),
