@@ -133,7 +133,8 @@ class Body:
         if gap.min() <= 0:
             raise SceneError(f"body {short(self.name)}: the face crosses the far side y = {far:g}; "
                              f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
-        if self.focus_depth is not None and not number(self.focus_depth, f"body {short(self.name)}: focus_depth") > 0:
+        if (self.focus_depth is not None
+                and not number(self.focus_depth, f"body {short(self.name)}: focus_depth", "positive") > 0):
             raise SceneError(f"body {short(self.name)}: focus_depth must be positive, got {short(self.focus_depth)}")
         for part in self.boundary:
             if part.interval is not None:
@@ -202,7 +203,7 @@ class ExactSpec:
         elif self.kind == "hertz":
             for name in ("R", "load"):
                 v = getattr(self, name)
-                if v is None or number(v, f"exact field 'hertz' {name}") <= 0:
+                if v is None or number(v, f"exact field 'hertz' {name}", "positive") <= 0:
                     raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
@@ -222,7 +223,7 @@ class MeshSpec:
 
     def __post_init__(self):
         integer(self.columns, "mesh columns", minimum=1)
-        if not number(self.grading, "mesh grading") >= 1:
+        if not number(self.grading, "mesh grading", 1.0) >= 1:
             raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {short(self.grading)}")
         integer(self.default_level, "mesh default_level", minimum=0)
         if self.focus is not None:
@@ -257,7 +258,7 @@ class Friction:
             raise SceneError(f"friction g (the Tresca slip threshold) must be >= 0, got {short(g)}; give its "
                              "magnitude, a traction in the scene's stress units (0 = frictionless, inf = full stick)")
         # inf is full stick; every finite value goes through the one number check (range, magnitude)
-        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)")
+        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)", "nonnegative")
         object.__setattr__(self, "g", v)
 
 
