@@ -85,6 +85,7 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_solve(args) -> int:
+    from .files import sweep_leftovers
     from .geometry.triangulation import check_triangulation
     from .model.solvers import resolve_solver
     from .outputs.output_set import check_output_dir, write_outputs
@@ -98,7 +99,9 @@ def _cmd_solve(args) -> int:
     time_limit = check_time_limit(args.time_limit)
     out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
-        check_output_dir(out)  # fail before the work, and create nothing until there are results
+        # fail before the work, and create nothing until there are results; but free the space of
+        # killed runs' leftovers now, not after a solve that may take minutes
+        sweep_leftovers(check_output_dir(out))
     hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
     with _solver_log_on_stderr(args.verbose), hard_stop:
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
