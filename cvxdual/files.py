@@ -22,11 +22,10 @@ leave one behind, never a pile) and again at its swap; other names' are left alo
 (:func:`sweep_leftovers` sweeps on request, e.g. before a long solve). Writers of one parent
 directory are serialised by an exclusive ``flock`` on the parent directory itself (no lock file),
 held while a staging directory is created and for the sweep and the swap, not while files are
-written. A staging
-directory is ``flock``-ed by its writer from its creation until the swap, so a concurrent run's
-sweep leaves it alone; the kernel drops that lock when its writer dies, so a killed run's is
-swept. Where ``flock`` is unavailable (no ``fcntl``: Windows) there is no exclusion and the sweep
-takes every leftover but the caller's own.
+written. A staging directory is ``flock``-ed by its writer from its creation until the swap, so a
+concurrent run's sweep leaves it alone; the kernel drops that lock when its writer dies, so a
+killed run's is swept. Where ``flock`` is unavailable (no ``fcntl``: Windows) there is no
+exclusion and the sweep takes every leftover but the caller's own.
 """
 
 from __future__ import annotations
