@@ -102,6 +102,17 @@ def test_python_api_replace_keeps_the_record():
     assert "exact.xc" in replace(hertz, exact=replace(hertz.exact, xc=1.0)).exact_mismatch
 
 
+def test_model_path_says_why_too():
+    """build_model on a changed scene: the model's own solution names the same reason."""
+    model = cd.build_model(cd.load_scene("patch", [{"contact": {"interval": [1.0, 7.0]}}]), level=0)
+    model.solve("CLARABEL")
+    sol = model.solution()
+    assert sol.error is None and "contact.interval" in sol.checks["skipped"]["error"]
+    model = cd.build_model("patch", level=0)
+    model.solve("CLARABEL")
+    assert model.solution().error["l2_rel"] < 1e-6  # unchanged: compared (constant field in the space)
+
+
 def test_units_conversion_keeps_what_applies():
     hertz = cd.load_scene("hertz")
     assert convert_units(hertz, 1e-3, 1e6, ("m", "Pa")).exact_mismatch is None
