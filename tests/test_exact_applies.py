@@ -115,7 +115,13 @@ def test_model_path_says_why_too():
 
 def test_units_conversion_keeps_what_applies():
     hertz = cd.load_scene("hertz")
-    assert convert_units(hertz, 1e-3, 1e6, ("m", "Pa")).exact_mismatch is None
+    in_si = convert_units(hertz, 1e-3, 1e6, ("m", "Pa"))
+    assert in_si.exact_mismatch is None
+    # the same solution in other units: the same relative error (to the solver's tolerance)
+    a, b = cd.solve(hertz, level=0, solver="fast"), cd.solve(in_si, level=0, solver="fast")
+    assert b.error["l2_rel"] == pytest.approx(a.error["l2_rel"], rel=1e-6)
+    # solver options do not change the problem either (Clarabel's, tighter)
+    assert cd.solve("patch", level=0, tol_gap_rel=1e-10).error["l2_rel"] < 1e-6
     moved = cd.load_scene("patch", [{"contact": {"interval": [1.0, 7.0]}}])
     converted = convert_units(moved, 1e-3, 1e6, ("m", "Pa"))
     assert converted.exact_mismatch == moved.exact_mismatch and "contact.interval" in converted.exact_mismatch
