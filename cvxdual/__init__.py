@@ -35,7 +35,7 @@ from .geometry import build_mesh, discretize
 from .outputs import write_outputs
 from .p0 import System, assemble
 from .pipeline import build_model, build_system, solve
-from .reference import HertzData, exact_field, hertz_line_contact, hertz_pressure, mcewen_stress
+from .reference import HertzData, exact_field, exact_reference, hertz_line_contact, hertz_pressure, mcewen_stress
 from .scene import (
     Body,
     BoundaryPart,
@@ -78,7 +78,7 @@ __all__ = [
     # meshes and assembly
     "build_mesh", "discretize", "assemble", "System",
     # closed forms
-    "exact_field", "HertzData", "hertz_line_contact", "hertz_pressure", "mcewen_stress",
+    "exact_field", "exact_reference", "HertzData", "hertz_line_contact", "hertz_pressure", "mcewen_stress",
     # outputs
     "write_outputs",
     # errors

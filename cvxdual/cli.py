@@ -51,7 +51,9 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         lines.append(f"friction: Tresca g = {_fmt(sol.scene.friction.g)} {S}; {int(k['stick'].sum())} active pairs "
                      f"stick, {slipping} slip; largest tangential force {_fmt(np.abs(k['tangential_force']).max())} "
                      f"{S}*{L}")
-    for name, why in s["checks_skipped"].items():
+    skipped = dict(s["checks_skipped"])
+    no_error = skipped.pop("error", None)
+    for name, why in skipped.items():
         lines.append(f"not checked: {name} ({why})")
     if s["fallback"]:
         lines.append(f"note: {s['fallback']}")
@@ -62,6 +64,8 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         e = s["error"]
         lines.append(f"error against the exact stress: L2 {e['l2']:.3e} (relative {e['l2_rel']:.2e}), "
                      f"energy relative {e['energy_rel']:.2e}")
+    elif no_error:
+        lines.append(f"no error against the exact stress: {no_error}")
     if s["bounds"]:
         b = s["bounds"]
         lines.append(f"certified bounds: {b['energy_lower']:.6g} <= J(u) <= {b['energy_upper']:.6g}; "
@@ -81,6 +85,7 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_solve(args) -> int:
+    from .files import sweep_leftovers
     from .geometry.triangulation import check_triangulation
     from .model.solvers import resolve_solver
     from .outputs.output_set import check_output_dir, write_outputs
@@ -94,7 +99,9 @@ def _cmd_solve(args) -> int:
     time_limit = check_time_limit(args.time_limit)
     out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
     if out is not None:
-        check_output_dir(out)  # fail before the work, and create nothing until there are results
+        # fail before the work, and create nothing until there are results; but free the space of
+        # killed runs' leftovers now, not after a solve that may take minutes
+        sweep_leftovers(check_output_dir(out))
     hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
     with _solver_log_on_stderr(args.verbose), hard_stop:
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,

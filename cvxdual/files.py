@@ -16,14 +16,16 @@ one atomic step, so readers and crashes see the old set or the new one, never a 
   ``.NAME.old-XXXXXXXX``, the staging directory to the target, remove the old set. A crash
   between the two renames leaves no target for a moment; the next run puts the old set back.
 
-Leftovers of killed runs (``.NAME.stage-*``, ``.NAME.old-*``) are swept by the next run of the
-same NAME, other names' are left alone. Writers of one parent directory are serialised by an
-exclusive ``flock`` on the parent directory itself (no lock file), held while a staging
-directory is created and for the sweep and the swap, not while files are written. A staging
-directory is ``flock``-ed by its writer from its creation until the swap, so a concurrent run's
-sweep leaves it alone; the kernel drops that lock when its writer dies, so a killed run's is
-swept. Where ``flock`` is unavailable (no ``fcntl``: Windows) there is no exclusion and the sweep
-takes every leftover but the caller's own.
+Leftovers of killed runs (``.NAME.stage-*``, ``.NAME.old-*``) are swept by every run of the same
+NAME as it starts writing (before it creates its own staging directory, so killed runs in a row
+leave one behind, never a pile) and again at its swap; other names' are left alone
+(:func:`sweep_leftovers` sweeps on request, e.g. before a long solve). Writers of one parent
+directory are serialised by an exclusive ``flock`` on the parent directory itself (no lock file),
+held while a staging directory is created and for the sweep and the swap, not while files are
+written. A staging directory is ``flock``-ed by its writer from its creation until the swap, so a
+concurrent run's sweep leaves it alone; the kernel drops that lock when its writer dies, so a
+killed run's is swept. Where ``flock`` is unavailable (no ``fcntl``: Windows) there is no
+exclusion and the sweep takes every leftover but the caller's own.
 """
 
 from __future__ import annotations
@@ -161,6 +163,7 @@ def staged_dir(out: str | Path):
     (inside the ``with``); it is locked while the block runs and removed if the block fails."""
     out = Path(out)
     with _locked(out.parent):  # created and locked at once: a concurrent sweep never sees it unlocked
+        sweep(out)  # killed runs' leftovers go before this run adds its own
         while True:
             stage = out.parent / f".{out.name}.stage-{secrets.token_hex(4)}"
             try:
@@ -206,6 +209,20 @@ def sweep(out: str | Path, keep: str | None = None) -> list[str]:
             continue
         done.append(name)
     return done
+
+
+def sweep_leftovers(out: str | Path) -> list[str]:
+    """:func:`sweep` under the parent directory's lock (nothing to do if the parent is missing)."""
+    out = Path(out)
+    if not out.parent.is_dir():
+        return []
+    try:
+        with _locked(out.parent):
+            return sweep(out)
+    except OSError as e:
+        where = repr(e.filename) if e.filename else f"beside {str(out)!r}"
+        raise OutputError(f"cannot remove what a killed run left in {where} ({e.strerror or e}); remove it "
+                          "yourself or choose another output directory") from None
 
 
 def replace_dir(stage: str | Path, out: str | Path, check=None) -> None:

@@ -32,6 +32,7 @@ BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver load
 # of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy").
 BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3}
 ENV = "CVXDUAL_MAX_MEMORY"
+PLAUSIBLE_MEMORY = 1e14  # bytes: more than any one machine has (100 TB)
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
           "TIB": 2**40}
 
@@ -110,15 +111,52 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
     limit = parse_size(given) if given is not None else available_memory()
     if est.bytes > limit:
         where = "the given limit" if given is not None else "the memory available"
-        lower = _largest_level(scene, level, fast, stress_space, bounds, limit)
         what = f"{short(scene.name, 40)} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"
-        if lower is None:
-            what += "; even level 0 is too large: give the scene fewer mesh columns or layers"
-        else:
+        lower = _largest_level(scene, level, fast, stress_space, bounds, limit)
+        fits = _largest_columns(scene, level, fast, stress_space, bounds, limit)
+        # past what any machine has, raising the limit is no fix (a hostile level or column count)
+        plausible = est.bytes <= PLAUSIBLE_MEMORY
+        raise_api = f" or raise the limit with max_memory='64GB' (or {ENV})" if plausible else ""
+        raise_cli = " or raise the limit with --max-memory 64GB" if plausible else ""
+        if lower is not None:
             what += f"; level {lower} fits"
-        raise TooLargeError(f"{what}; lower the level or raise the limit with max_memory='64GB' (or {ENV})",
-                            cli=f"{what}; lower --level or raise the limit with --max-memory 64GB")
+            cols = "" if fits is None else f", give fewer mesh columns (mesh.columns = {fits} fits at level {level})"
+            raise TooLargeError(f"{what}; lower the level{cols}{raise_api}",
+                                cli=f"{what}; lower --level{cols}{raise_cli}")
+        # even level 0 is too large: no level helps; the mesh's columns are too many (or its layers)
+        what += f"; even level 0 is too large with {_count(scene.mesh.columns)} mesh columns"
+        if fits is not None:
+            raise TooLargeError(f"{what}: give fewer mesh columns (mesh.columns = {fits} fits at level {level})"
+                                + raise_api, cli=f"{what}: give fewer mesh columns (mesh.columns = {fits} fits "
+                                f"at level {level})" + raise_cli)
+        both = next(((lv, n) for lv in reversed(range(min(level, 12)))
+                     if (n := _largest_columns(scene, lv, fast, stress_space, bounds, limit)) is not None), None)
+        if both is not None:
+            fix = f"give fewer mesh columns and a lower level (mesh.columns = {both[1]} fits at level {both[0]})"
+            raise TooLargeError(f"{what}: {fix}{raise_api}", cli=f"{what}: {fix.replace('level (', '--level (')}"
+                                f"{raise_cli}")
+        layers = ", ".join(f"{b.name} {_count(b.layers)}" for b in scene.bodies)
+        what += f", and so is one mesh column with the bodies' layers ({layers}): give the bodies fewer layers"
+        raise TooLargeError(what + raise_api, cli=what + raise_cli)
     return est
+
+
+def _largest_columns(scene, level, fast, stress_space, bounds, limit) -> int | None:
+    """The largest ``mesh.columns`` below the scene's whose mesh fits ``limit`` at ``level``, or
+    ``None`` if even one column does not."""
+    from dataclasses import replace
+
+    def fits(n: int) -> bool:
+        return estimate(replace(scene, mesh=replace(scene.mesh, columns=n)), level, fast, stress_space,
+                        bounds).bytes <= limit
+
+    lo, hi = 1, scene.mesh.columns  # fits(lo) is checked, fits(hi) is false
+    if hi <= 1 or not fits(lo):
+        return None
+    while hi - lo > 1:  # at most 64 estimates (columns are at most 1e100, about 2^332: 333)
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
 
 
 def peak_mb() -> float:

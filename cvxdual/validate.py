@@ -36,8 +36,19 @@ def short(value, limit: int = MAX_SHOWN) -> str:
     return one_line(text, limit)
 
 
-def number(value, what: str) -> float:
-    """A finite real number of magnitude 0 or in ``[TINY, HUGE]`` (``bool`` and strings are rejected)."""
+# what a value too small to compute with should be instead, by the values its caller accepts
+# (the advice must admit what it advises: "give 0" for a quantity that must be positive would not)
+SMALL_FIX = {"any": f"give 0 or a magnitude of at least {TINY:g}",
+             "nonzero": f"give a magnitude of at least {TINY:g}",
+             "nonnegative": f"give 0 or a value of at least {TINY:g}",
+             "positive": f"give a positive value of at least {TINY:g}"}
+
+
+def number(value, what: str, accepts: str | float = "any") -> float:
+    """A finite real number of magnitude 0 or in ``[TINY, HUGE]`` (``bool`` and strings are rejected).
+    ``accepts`` (``"any"``, ``"nonzero"``, ``"nonnegative"``, ``"positive"`` or the smallest value
+    accepted) only shapes the advice for a value too small to compute with: the caller checks its
+    own range after, with its own message."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise SceneError(f"{what} must be a number, got {short(value)}")
     try:
@@ -47,7 +58,8 @@ def number(value, what: str) -> float:
     if not math.isfinite(v) or abs(v) > HUGE:
         raise SceneError(f"{what} must be a finite number of magnitude at most {HUGE:g}, got {short(value)}")
     if v != 0.0 and abs(v) < TINY:
-        raise SceneError(f"{what} = {v:g} is too small to compute with; give 0 or a magnitude of at least {TINY:g}")
+        fix = SMALL_FIX[accepts] if isinstance(accepts, str) else f"give a value of at least {max(accepts, TINY):g}"
+        raise SceneError(f"{what} = {v:g} is too small to compute with; {fix}")
     return v
 
 

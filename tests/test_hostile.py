@@ -61,7 +61,7 @@ REFUSED = [
     ("a y interval off its side", ["--scene", "patch", "--set", "bodies.top.boundary.symmetry.interval=[-5.0,-1.0]"],
      {}, "outside its side"),
     ("--set base", ["--scene", "patch", "--set", "base=hertz"], {}, "cannot change 'base'"),
-    ("level 30", ["--scene", "hertz", "--level", "30"], {}, "--max-memory"),
+    ("level 30", ["--scene", "hertz", "--level", "30"], {}, "lower --level"),  # 1e14 GB: no limit to raise
     ("columns 1e8", ["--scene", "patch", "--set", "mesh.columns=100000000"], {}, "fewer mesh columns"),
     ("level 7 under a limit", ["--scene", "hertz", "--level", "7", "--solver", "fast", "--max-memory", "2GB"], {},
      "level 5 fits"),
@@ -266,3 +266,113 @@ def test_default_solver_by_size_and_its_hand_over(monkeypatch):
     assert sol.solver["solver"] == "CLARABEL" and sol.summary()["fallback"].startswith("SCS failed")
     with pytest.raises(cd.SolverError):
         cd.solve("hertz", "type1", 1, "SCS")
+
+
+# -- issue 26: each error line names the actual cause, and its advice is a fix that works ---------
+def _dir(tmp_path):
+    (tmp_path / "d.toml").mkdir()
+    return "d.toml"
+
+
+def _dangling(tmp_path):
+    (tmp_path / "l.toml").symlink_to(tmp_path / "nowhere.toml")
+    return "l.toml"
+
+
+def _base_dir(tmp_path):
+    (tmp_path / "d.toml").mkdir()
+    (tmp_path / "b.toml").write_text('base = "d.toml"\n')
+    return "b.toml"
+
+
+CAUSES = [("a directory", _dir, "is a directory, not a scene file"),
+          ("a device", lambda tmp_path: "/dev/null", "is not a regular file (a device"),
+          ("a dangling link", _dangling, "does not exist (a symbolic link to nothing)"),
+          ("a missing file", lambda tmp_path: "none.toml", "does not exist; check the path"),
+          ("a directory as base", _base_dir, "base 'd.toml': 'd.toml' is a directory")]
+
+
+@pytest.mark.parametrize("make, words", [c[1:] for c in CAUSES], ids=[c[0] for c in CAUSES])
+def test_scene_path_errors_name_their_cause(tmp_path, monkeypatch, capsys, make, words):
+    monkeypatch.chdir(tmp_path)
+    rc, err, created = run_cli(tmp_path, monkeypatch, capsys, RUN + ["--scene", make(tmp_path)])
+    assert rc == 1 and len(err) == 1 and words in err[0] and created == set()
+    if "exist" not in words:
+        assert "does not exist" not in err[0]  # the audit's finding: a directory or a device "did not exist"
+
+
+def test_load_scene_of_a_directory():
+    with pytest.raises(cd.SceneError, match="'/tmp' is a directory, not a scene file"):
+        cd.load_scene("/tmp")
+
+
+def test_a_path_that_cannot_be_reached(tmp_path, monkeypatch):
+    """A directory on the path that the user may not search: a permission problem, not a missing file."""
+    import cvxdual.scene.scenefile as scenefile
+    real = os.stat
+
+    def stat(path, *a, **k):
+        if str(path).endswith("hidden.toml"):
+            raise PermissionError(13, "Permission denied")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(scenefile.os, "stat", stat)
+    with pytest.raises(cd.SceneError, match="cannot be reached: a directory on its path is not readable"):
+        cd.load_scene(tmp_path / "locked" / "hidden.toml")
+
+
+def test_a_bare_name_that_is_a_file_here(tmp_path, monkeypatch, capsys):
+    rc, err, _ = run_cli(tmp_path, monkeypatch, capsys, RUN + ["--scene", "myscene"], {"myscene": BASE})
+    assert rc == 1 and "unknown scene 'myscene'" in err[0] and "give it as ./myscene" in err[0]
+
+
+# (the value too small to compute with, where it goes, the advice, a value the advice admits)
+SMALL = [("E", lambda v: cd.Material.isotropic(v, 0.3), "give a positive value of at least 1e-100", 1e-100),
+         ("nu", lambda v: cd.Material.isotropic(7e4, v), "give 0 or a magnitude of at least 1e-100", 0.0),
+         ("grading", lambda v: cd.MeshSpec(grading=v), "give a value of at least 1", 1.0),
+         ("hertz R", lambda v: cd.ExactSpec("hertz", R=v, load=1.0), "give a positive value of at least 1e-100",
+          1e-100),
+         ("parabola R", lambda v: cd.scene.profiles.Parabola(R=v), "give a magnitude of at least 1e-100", -1e-100),
+         ("circle R", lambda v: cd.scene.profiles.Circle(R=v), "give a positive value of at least 1e-100", 1e-100),
+         ("Tresca g", lambda v: cd.Friction(g=v), "give 0 or a value of at least 1e-100", 0.0)]
+
+
+@pytest.mark.parametrize("build, advice, admitted", [c[1:] for c in SMALL], ids=[c[0] for c in SMALL])
+def test_small_value_advice_is_admitted(build, advice, admitted):
+    """The audit: E = 1e-300 was told "give 0 or a magnitude of at least 1e-100", and E = 0 was
+    refused. Each advice now names values the quantity takes, and one of them is taken."""
+    with pytest.raises(cd.SceneError) as info:
+        build(1e-300)
+    assert str(info.value).endswith(advice)
+    build(admitted)  # no error
+
+
+def test_zero_modulus_after_the_advice(tmp_path, monkeypatch, capsys):
+    argv = RUN + ["--scene", "patch", "--set", "bodies.top.material.E=1e-300"]
+    rc, err, _ = run_cli(tmp_path, monkeypatch, capsys, argv)
+    assert rc == 1 and "give 0" not in err[0] and "positive" in err[0]
+
+
+def test_a_huge_column_count_is_the_column_counts_fault(tmp_path, monkeypatch, capsys):
+    """mesh.columns = 2^63 - 1 at level 1: no level fits, so the advice is the column count (one
+    that fits, at the level asked for), not --level, and no limit to raise (4e15 GB)."""
+    argv = RUN + ["--scene", "patch", "--level", "1", "--max-memory", "4GB",
+                  "--set", "mesh.columns=9223372036854775807"]
+    rc, err, _ = run_cli(tmp_path, monkeypatch, capsys, argv)
+    assert rc == 1 and len(err) == 1
+    line = err[0]
+    assert "even level 0 is too large with 9.22e+18 mesh columns: give fewer mesh columns (mesh.columns = " in line
+    assert "--level" not in line and "raise the limit" not in line
+    fits = int(line.split("mesh.columns = ")[1].split()[0])
+    from cvxdual.sizing import check_size
+    scene = cd.load_scene("patch", [{"mesh": {"columns": fits}}])
+    check_size(scene, 1, False, max_memory="4GB")  # the advised count fits
+    with pytest.raises(cd.TooLargeError):
+        check_size(cd.load_scene("patch", [{"mesh": {"columns": fits + 1}}]), 1, False, max_memory="4GB")
+
+
+def test_a_large_column_count_where_a_lower_level_fits(tmp_path, monkeypatch, capsys):
+    argv = RUN + ["--scene", "patch", "--level", "1", "--max-memory", "4GB", "--set", "mesh.columns=20000"]
+    rc, err, _ = run_cli(tmp_path, monkeypatch, capsys, argv)
+    assert rc == 1 and "level 0 fits; lower --level, give fewer mesh columns (mesh.columns = " in err[0]
+    assert "or raise the limit with --max-memory 64GB" in err[0]  # 5 GB: a machine may have it

@@ -261,3 +261,53 @@ def test_cli_refuses_a_foreign_directory(tmp_path, capsys):
     assert err.startswith("cvxdual: error: refusing to write outputs") and len(err.strip().splitlines()) == 1
     assert "'thesis.tex'" in err and "choose an empty or cvxdual-written --out" in err
     assert os.listdir(out) == ["thesis.tex"] and os.listdir(tmp_path) == ["o"]
+
+
+def _stages(parent: Path) -> list[str]:
+    return sorted(n for n in os.listdir(parent) if n.startswith(".o.stage-") or n.startswith(".o.old-"))
+
+
+def test_leftovers_go_when_a_run_starts_writing(tmp_path):
+    """Issue 26: killed runs' staging directories went only after a completed run; now each run
+    removes them before it adds its own, and the CLI before its solve."""
+    out = tmp_path / "o"
+    for i in range(3):
+        (tmp_path / f".o.stage-0000000{i}").mkdir()
+        (tmp_path / f".o.stage-0000000{i}" / "solution.vtu").write_bytes(b"half")
+    with files.staged_dir(out) as stage:
+        assert _stages(tmp_path) == [stage.name]  # before anything of this run is written
+    # a run that ended without its swap left its directory; the CLI's sweep before a solve takes it
+    assert files.sweep_leftovers(out) == [stage.name] and _stages(tmp_path) == []
+    assert files.sweep_leftovers(tmp_path / "missing" / "o") == []  # no parent: nothing to sweep
+
+
+@pytest.mark.skipif(not hasattr(os, "fork") or files.fcntl is None, reason="fork and flock (POSIX)")
+def test_kills_in_a_row_leave_one_staging_directory(tmp_path):
+    """Writers killed (SIGKILL) while filling their staging directory, six in a row with no
+    completed run between them: at most one staging directory at any time (the last one killed,
+    or the live writer's own), polled while each writer runs."""
+    out = tmp_path / "o"
+    most = 0
+    for _ in range(6):
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # a writer that is killed half-way through its set
+            try:
+                os.close(r)
+                with files.staged_dir(out) as stage:
+                    (stage / "solution.vtu").write_bytes(b"half a set")
+                    os.write(w, b"x")
+                    time.sleep(60)
+            finally:
+                os._exit(1)
+        os.close(w)
+        most = max(most, len(_stages(tmp_path)))
+        assert os.read(r, 1) == b"x"  # the writer has its staging directory
+        os.close(r)
+        most = max(most, len(_stages(tmp_path)))
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        most = max(most, len(_stages(tmp_path)))
+    assert most == 1 and len(_stages(tmp_path)) == 1
+    files.sweep_leftovers(out)  # the next run (here: the CLI's sweep before its solve)
+    assert _stages(tmp_path) == []

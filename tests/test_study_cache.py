@@ -20,7 +20,7 @@ import pytest
 
 from cvxdual import CvxdualError
 from cvxdual.study import load_spec, run
-from cvxdual.study.cache import ARRAY_FORMAT, ROW_FORMAT, Cache, _array_digest, _digest
+from cvxdual.study.cache import ARRAY_FORMAT, KEY_FILE, ROW_FORMAT, Cache, _array_digest
 from cvxdual.study.cases import (
     base_row,
     field_key,
@@ -37,17 +37,21 @@ SPEC = {"name": "tiny", "scenes": ["patch"], "levels": [0, 1], "triangulations":
 N = 40  # pieces of the studied mesh in the unit tests (any size: nothing is solved there)
 
 
-# -- writing entries as an attacker would: the format, the key and a correct checksum -----------
+# -- writing entries as an attacker who holds the cache's key would: format, key, a correct MAC --
+def _cache_of(path: Path) -> Cache:
+    return Cache(path.parent.parent)  # ROOT/rows/KEY.json, ROOT/arrays/KEY.npz
+
+
 def forge_row(path: Path, key: str, row, **over) -> None:
-    entry = {"format": ROW_FORMAT, "key": key, "checksum": _digest(row), "row": row, **over}
+    entry = {"format": ROW_FORMAT, "key": key, "mac": _cache_of(path).mac(ROW_FORMAT, key, row), "row": row, **over}
     path.write_text(json.dumps(entry))  # json.dumps writes NaN and Infinity literals as they are
 
 
 def forge_arrays(path: Path, key: str, meta=None, **arrays) -> None:
     if meta is None:
-        meta = {"format": ARRAY_FORMAT, "key": key,
-                "arrays": {k: {"shape": list(a.shape), "dtype": str(a.dtype), "sha256": _array_digest(a)}
-                           for k, a in arrays.items()}}
+        rec = {k: {"shape": list(a.shape), "dtype": str(a.dtype), "sha256": _array_digest(a)}
+               for k, a in arrays.items()}
+        meta = {"format": ARRAY_FORMAT, "key": key, "arrays": rec, "mac": _cache_of(path).mac(ARRAY_FORMAT, key, rec)}
     with open(path, "wb") as fh:
         np.savez(fh, __meta__=np.array(json.dumps(meta)), **arrays)
 
@@ -81,9 +85,16 @@ def not_utf8(p, ctx):
     p.write_bytes(b"\xff\xfe\x00{" + bytes(range(128, 256)))
 
 
-def flip_byte(p, ctx):  # an edited entry: its checksum (or the zip's CRC) no longer matches
+def flip_byte(p, ctx):  # an edited entry: its MAC (or the zip's CRC) no longer matches
     raw = bytearray(p.read_bytes())
-    raw[len(raw) // 2] ^= 0x5A
+    at = len(raw) // 2
+    if p.suffix == ".npz":  # in the middle of the stress data (the file's middle may be a zip header field)
+        with zipfile.ZipFile(p) as z:
+            info = z.getinfo("stress.npy")
+        h = info.header_offset  # a local file header: 30 bytes, then the name and the extra field
+        names, extra = int.from_bytes(raw[h + 26:h + 28], "little"), int.from_bytes(raw[h + 28:h + 30], "little")
+        at = h + 30 + names + extra + info.compress_size // 2
+    raw[at] ^= 0x5A
     p.write_bytes(bytes(raw))
 
 
@@ -136,7 +147,7 @@ def text(s):
     return f
 
 
-def edit_entry(**over):  # the entry's own fields changed (format, key, checksum, row), checksum kept
+def edit_entry(**over):  # the entry's own fields changed (format, key, MAC, row), MAC kept
     def f(p, ctx):
         d = read_row_entry(p)
         for k, v in over.items():
@@ -151,7 +162,7 @@ def edit_entry(**over):  # the entry's own fields changed (format, key, checksum
 DROP = object()
 
 
-def forge(**over):  # the row changed and the checksum recomputed: only the content checks remain
+def forge(**over):  # the row changed and the MAC recomputed with the key: only the content checks remain
     def f(p, ctx):
         d = read_row_entry(p)
         row = {**d["row"], **{k: v for k, v in over.items() if v is not DROP}}
@@ -176,8 +187,8 @@ def row_is_list(p, ctx):
 ROWS = {"json list": text("[1, 2]"), "json string": text('"row"'), "json number": text("3.5"),
         "json null": text("null"), "json empty dict": text("{}"), "deep nesting": text("[" * 100000),
         "wrong format tag": edit_entry(format="cvxdual-study-row/0"), "no format": edit_entry(format=DROP),
-        "no key": edit_entry(key=DROP), "no checksum": edit_entry(checksum=DROP), "no row": edit_entry(row=DROP),
-        "key is a number": edit_entry(key=7), "checksum is a number": edit_entry(checksum=12345),
+        "no key": edit_entry(key=DROP), "no MAC": edit_entry(mac=DROP), "no row": edit_entry(row=DROP),
+        "key is a number": edit_entry(key=7), "MAC is a number": edit_entry(mac=12345),
         "row is a list": row_is_list, "row is a string": edit_entry(row="optimal")}
 CASE_ROWS = {"another level's row": forge(level=1), "another solver's row": forge(solver="fast"),
              "another study's row": forge(study="other"),
@@ -192,7 +203,12 @@ CASE_ROWS = {"another level's row": forge(level=1), "another solver's row": forg
              "time is a string": forge(t_solve="fast"), "missing required field": forge(worker=DROP),
              "missing error": forge(error_l2=DROP),
              "stress key of another case": forge(stress_key="sother"), "stress key a path": forge(stress_key="../x"),
-             "stress key a number": forge(stress_key=3), "no stress key": forge(stress_key=DROP)}
+             "stress key a number": forge(stress_key=3), "no stress key": forge(stress_key=DROP),
+             # issue 26: the flag says what the residuals say, whatever it was edited to
+             "residual above its tolerance, flag true": forge(res_equilibrium=123.0),
+             "residuals within, flag false": forge(within_tolerances=False),
+             "a residual missing, flag true": forge(res_duality_gap=DROP),
+             "flag a string": forge(within_tolerances="true")}
 INFO_ROWS = {"another level's info": forge(level=3), "another triangulation's": forge(triangulation="type1"),
              "error est. is null": forge(error_est=None), "error est. negative": forge(error_est=-1e-3),
              "error est. is a string": forge(error_est="small"), "rate is a dict": forge(rate={"p": 1}),
@@ -259,11 +275,12 @@ def meta(value):
     return f
 
 
-def meta_edit(**over):
+def meta_edit(**over):  # the metadata changed, its MAC kept (or the MAC changed)
     def f(p, ctx):
-        good = {"format": ARRAY_FORMAT, "key": ctx["key"],
-                "arrays": {k: {"shape": list(a.shape), "dtype": str(a.dtype), "sha256": _array_digest(a)}
-                           for k, a in ctx["arrays"].items()}}
+        rec = {k: {"shape": list(a.shape), "dtype": str(a.dtype), "sha256": _array_digest(a)}
+               for k, a in ctx["arrays"].items()}
+        good = {"format": ARRAY_FORMAT, "key": ctx["key"], "arrays": rec,
+                "mac": _cache_of(p).mac(ARRAY_FORMAT, ctx["key"], rec)}
         forge_arrays(p, ctx["key"], {**good, **over}, **ctx["arrays"])
     return f
 
@@ -303,6 +320,7 @@ ARRAYS = {"pickle file": pickled_file, "object array meta": object_meta, "object
           "metadata not json": meta("{broken"), "metadata a list": meta([1, 2]),
           "metadata wrong format": meta_edit(format="cvxdual-study-arrays/0"), "metadata wrong key": meta_edit(key="x"),
           "metadata without arrays": meta_edit(arrays=None), "metadata arrays a list": meta_edit(arrays=["stress"]),
+          "metadata without MAC": meta_edit(mac=None), "metadata MAC of other arrays": meta_edit(mac="0" * 64),
           "metadata names differ": meta_edit(arrays={"other": {}}),
           "wrong array name": forge_a(_rename), "array missing": forge_a(lambda a: {"other": np.ones(3)}),
           "shape (n+1, 3)": forge_a(_set("stress", lambda v: np.vstack([v, v[:1]]))),
@@ -327,7 +345,9 @@ def tiny_cases():
 def valid_row(case, key: str) -> dict:
     return {**base_row(case), "status": "optimal", "n_pieces": N, "h": 2.5, "error_l2": 1e-3,
             "error_l2_rel": 1e-5, "error_energy": 2e-3, "error_energy_rel": 2e-5, "reference_error_est": 1e-9,
-            "res_equilibrium": 1e-15, "t_solve": 0.1, "t_total": 0.2, "iterations": 7, "within_tolerances": True,
+            "res_equilibrium": 1e-15, "res_constitutive": 1e-10, "res_complementarity": 1e-10,
+            "res_penetration": 0.0, "res_duality_gap": 1e-9, "t_solve": 0.1, "t_total": 0.2, "iterations": 7,
+            "within_tolerances": True,
             "worker": "tcp://127.0.0.1:1", "stress_key": "s" + key, "key": key, "cached": False}
 
 
@@ -424,6 +444,61 @@ def test_cache_keys_and_plain_entries(tmp_path):
     assert c.get_arrays("ints")["a"].dtype == np.float64
     assert c.get_row("nothing") is None and c.get_arrays("nothing") is None
     assert Cache(None).get_arrays("x") is None and Cache(None).put_row("x", {"a": np.float64(1)}) == {"a": 1.0}
+
+
+# -- issue 26: forged rows ------------------------------------------------------------------------
+def _plain_checksum(row) -> str:
+    import hashlib
+    return hashlib.sha256(json.dumps(row, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def test_forged_row_without_the_key_is_refused(tmp_path):
+    """The audit's row: edited by hand (res_equilibrium = 123, within_tolerances = true) with its
+    SHA-256 checksum recomputed. Without the cache's key there is no MAC to recompute."""
+    e = Entries(tmp_path / "cache")
+    p = e.path("caseA")
+    d = read_row_entry(p)
+    row = {**d["row"], "res_equilibrium": 123.0, "within_tolerances": True}
+    for entry in ({"format": "cvxdual-study-row/1", "key": "caseA", "checksum": _plain_checksum(row), "row": row},
+                  {"format": ROW_FORMAT, "key": "caseA", "mac": _plain_checksum(row), "row": row},
+                  {**d, "row": row}):  # the old MAC kept
+        p.write_text(json.dumps(entry))
+        assert e.load("caseA") is None
+    # a valid row of another cache (another key), copied over this one's
+    other = Cache(tmp_path / "other")
+    other.put_row("caseA", valid_row(e.case, "caseA"))
+    p.write_bytes((tmp_path / "other" / "rows" / "caseA.json").read_bytes())
+    assert e.load("caseA") is None
+    e.restore("caseA")
+    assert e.load("caseA") is not None
+
+
+def test_forged_row_with_the_key_is_refused_by_its_residuals(tmp_path):
+    """Whoever holds the key can sign any row: a flag that its residuals contradict is still refused."""
+    e = Entries(tmp_path / "cache")
+    forge(res_equilibrium=123.0, within_tolerances=True)(e.path("caseA"), {})
+    assert e.load("caseA") is None
+    forge(res_equilibrium=123.0, within_tolerances=False)(e.path("caseA"), {})  # honest about its residuals
+    assert e.load("caseA")["within_tolerances"] is False
+
+
+def test_the_cache_key(tmp_path):
+    root = tmp_path / "cache"
+    c = Cache(root)
+    assert c.get_row("x") is None and not root.exists()  # reading creates nothing
+    c.put_row("x", {"a": 1})
+    key = root / KEY_FILE
+    assert key.stat().st_mode & 0o777 == 0o600 and len(key.read_text()) == 64
+    assert Cache(root).get_row("x") == {"a": 1}  # another process's Cache reads it with the same key
+    assert sorted(p.name for p in root.iterdir()) == [KEY_FILE, "rows"]  # no temporary left
+    key.write_text("not a key")
+    assert Cache(root).get_row("x") is None  # nothing checks: not cached
+    with pytest.raises(CvxdualError, match="is not a key .* remove it, and the cache's entries are recomputed"):
+        Cache(root).put_row("x", {"a": 1})
+    key.unlink()
+    assert Cache(root).get_row("x") is None  # signed with a key that is gone
+    Cache(root).put_row("x", {"a": 2})
+    assert Cache(root).get_row("x") == {"a": 2}
 
 
 # -- end to end: a tiny study, its cache corrupted, rerun ----------------------------------------

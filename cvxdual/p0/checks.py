@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from ..reference.exact import exact_field
+from ..reference.exact import exact_reference
 from ..solution import ACTIVE_TOL, FORCE_FLOOR, SolverStats, load_scale
 from ..voigt import VOIGT_WEIGHT
 from .assembly import System
@@ -150,12 +150,13 @@ def evaluate(system: System, t: np.ndarray, u: np.ndarray, stats: SolverStats, f
     """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
     displacements ``u``: every field of a :class:`Solution` that the solve itself does not give,
     and ``timings["error"]``, the time of the error against the exact field (``friction``,
-    ``adhesion``, ``displacements``: see :func:`contact_quantities`)."""
+    ``adhesion``, ``displacements``: see :func:`contact_quantities`). Where the scene declares an
+    exact field that does not solve it, ``exact`` and ``error`` are ``None`` and ``checks`` says why."""
     scene = system.mesh.scene
     adm = admissibility(system, t)
     contact = contact_quantities(system, adm[0], u, friction, adhesion, displacements)
     res = residuals(system, t, u, contact, adm)
-    exact = exact_field(scene)
+    exact, why = exact_reference(scene)
     error, t0 = None, time.perf_counter()
     if exact is not None:
         error = stress_error(system, t, exact.stress)
@@ -163,4 +164,10 @@ def evaluate(system: System, t: np.ndarray, u: np.ndarray, stats: SolverStats, f
             "scene": scene, "system": system, "stress": t, "displacement": u.reshape(-1, 2), "solver": stats,
             "objective": dual_objective(system, t), "duality_gap": res["duality_gap"], "residuals": res,
             "contact": contact, "exact": exact.data() if exact is not None else None,
-            "error": error}
+            "error": error, "checks": skipped_error(res, why)}
+
+
+def skipped_error(residuals: dict, why: str | None) -> dict | None:
+    """A solution's ``checks`` when the scene's exact field does not solve it (``why``): every
+    residual applied, the error skipped with the reason; ``None`` (all applied) otherwise."""
+    return None if why is None else {"applied": dict(residuals), "skipped": {"error": why}}

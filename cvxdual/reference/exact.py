@@ -2,7 +2,9 @@
 
 An exact field evaluates the Voigt stress ``(s11, s22, s12)`` of body ``k`` (0 upper,
 1 lower) at points ``(m, 2)``. Scenes use it for their ``exact`` tractions on truncated
-boundaries and the error norms use it as the reference.
+boundaries, and the error norms use it as the reference where it solves the scene
+(:func:`exact_reference`): a field declared for one problem says nothing about the error of
+another.
 """
 
 from __future__ import annotations
@@ -66,3 +68,25 @@ def exact_field(scene: Scene):
     except ValueError as e:
         raise SceneError(f"exact field 'hertz': {e}") from None
     return HertzField(data, spec.xc, up.face.y0)
+
+
+def exact_reference(scene: Scene):
+    """``(field, None)``: the exact field to measure ``scene``'s solutions against, or
+    ``(None, why)`` when the scene declares a field that does not solve it (it was declared for
+    other values, :attr:`~cvxdual.scene.Scene.exact_mismatch`, or a Hertz contact zone reaches out
+    of the candidate contact interval), or ``(None, None)`` when it declares none."""
+    why = scene.exact_mismatch
+    if scene.exact is None or why is not None:
+        return None, why
+    field = exact_field(scene)
+    if isinstance(field, HertzField):
+        # the closed form presses the faces together on [xc - a, xc + a]; where that lies on both
+        # bodies, it must be free to touch (a is computed from the loads, which may have changed)
+        lo, hi = max(b.x_range[0] for b in scene.bodies), min(b.x_range[1] for b in scene.bodies)
+        z0, z1 = max(field.xc - field.hertz.a, lo), min(field.xc + field.hertz.a, hi)
+        a, b = scene.contact
+        tol = 1e-9 * (hi - lo)
+        if z0 < z1 and (z0 < a - tol or z1 > b + tol):
+            return None, (f"the Hertz contact zone [{z0:.4g}, {z1:.4g}] reaches out of the candidate contact interval "
+                          f"[{a:.4g}, {b:.4g}], so the exact field does not solve this problem")
+    return field, None

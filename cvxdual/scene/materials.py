@@ -32,7 +32,7 @@ class Material:
 
     @classmethod
     def isotropic(cls, E: float, nu: float, plane: str = "strain") -> "Material":
-        E = number(E, "material E")
+        E = number(E, "material E", "positive")
         nu = number(nu, "material nu")
         if plane not in PLANES:
             raise SceneError(f"plane must be 'strain' or 'stress', got {plane!r}")

@@ -32,10 +32,12 @@ class Profile:
     """Base class; subclasses define ``kind`` and the evaluation methods."""
 
     kind: ClassVar[str] = ""
+    accepts: ClassVar[dict] = {}  # parameter -> the values it takes (validate.number), where not any
 
     def __post_init__(self):
         for f in fields(self):
-            object.__setattr__(self, f.name, number(getattr(self, f.name), f"{self.kind} profile: '{f.name}'"))
+            object.__setattr__(self, f.name, number(getattr(self, f.name), f"{self.kind} profile: '{f.name}'",
+                                                    self.accepts.get(f.name, "any")))
 
     def value(self, x):
         raise NotImplementedError
@@ -106,6 +108,7 @@ class Flat(Profile):
 @dataclass(frozen=True)
 class Parabola(Profile):
     kind: ClassVar[str] = "parabola"
+    accepts: ClassVar[dict] = {"R": "nonzero"}
     R: float = 1.0
     xc: float = 0.0
     y0: float = 0.0
@@ -137,6 +140,7 @@ class Parabola(Profile):
 @dataclass(frozen=True)
 class Circle(Profile):
     kind: ClassVar[str] = "circle"
+    accepts: ClassVar[dict] = {"R": "positive"}
     R: float = 1.0
     xc: float = 0.0
     yc: float = 1.0
@@ -201,6 +205,7 @@ class UpperCircle(Circle):
 @dataclass(frozen=True)
 class Cosine(Profile):
     kind: ClassVar[str] = "cosine"
+    accepts: ClassVar[dict] = {"wavelength": "positive"}
     amplitude: float = 0.0
     wavelength: float = 1.0
     x0: float = 0.0

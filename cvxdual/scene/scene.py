@@ -133,7 +133,8 @@ class Body:
         if gap.min() <= 0:
             raise SceneError(f"body {short(self.name)}: the face crosses the far side y = {far:g}; "
                              f"move the far side {'above' if self.position == 'upper' else 'below'} the face")
-        if self.focus_depth is not None and not number(self.focus_depth, f"body {short(self.name)}: focus_depth") > 0:
+        if (self.focus_depth is not None
+                and not number(self.focus_depth, f"body {short(self.name)}: focus_depth", "positive") > 0):
             raise SceneError(f"body {short(self.name)}: focus_depth must be positive, got {short(self.focus_depth)}")
         for part in self.boundary:
             if part.interval is not None:
@@ -170,15 +171,28 @@ class Body:
 class ExactSpec:
     """The scene's closed-form ``lam*``: ``uniform`` (a constant Voigt stress, both bodies)
     or ``hertz`` (linearised Hertz line contact of radius ``R`` under ``load`` per unit
-    length of the full contact, centred at ``xc`` on the face ``y = 0``)."""
+    length of the full contact, centred at ``xc`` on the face ``y = 0``).
+
+    A field solves the problem it was declared for, not any other: ``declared_for`` records that
+    problem (:func:`problem_entries`), filled in by the :class:`Scene` that first holds the spec and
+    kept through ``dataclasses.replace`` and ``--set`` overrides, so :attr:`Scene.exact_mismatch`
+    can tell when the scene has changed under it. ``any_material`` (``uniform`` only) is the
+    declarer's claim that the field solves the scene for any isotropic materials (a patch test)."""
 
     kind: str
     stress: tuple[float, float, float] | None = None
     R: float | None = None
     load: float | None = None
     xc: float = 0.0
+    any_material: bool = False
+    declared_for: tuple | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if not isinstance(self.any_material, bool):
+            raise SceneError(f"exact field any_material must be true or false, got {short(self.any_material)}")
+        if self.any_material and self.kind != "uniform":
+            raise SceneError("exact field any_material is for a 'uniform' field; a 'hertz' field follows the "
+                             "materials by itself: drop any_material")
         if self.kind == "uniform":
             if self.stress is None or isinstance(self.stress, str) or len(self.stress) != 3:
                 raise SceneError("exact field 'uniform' needs stress = [s11, s22, s12]")
@@ -189,7 +203,7 @@ class ExactSpec:
         elif self.kind == "hertz":
             for name in ("R", "load"):
                 v = getattr(self, name)
-                if v is None or number(v, f"exact field 'hertz' {name}") <= 0:
+                if v is None or number(v, f"exact field 'hertz' {name}", "positive") <= 0:
                     raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
@@ -209,7 +223,7 @@ class MeshSpec:
 
     def __post_init__(self):
         integer(self.columns, "mesh columns", minimum=1)
-        if not number(self.grading, "mesh grading") >= 1:
+        if not number(self.grading, "mesh grading", 1.0) >= 1:
             raise SceneError(f"mesh grading must be a number >= 1 (1 = uniform), got {short(self.grading)}")
         integer(self.default_level, "mesh default_level", minimum=0)
         if self.focus is not None:
@@ -244,7 +258,7 @@ class Friction:
             raise SceneError(f"friction g (the Tresca slip threshold) must be >= 0, got {short(g)}; give its "
                              "magnitude, a traction in the scene's stress units (0 = frictionless, inf = full stick)")
         # inf is full stick; every finite value goes through the one number check (range, magnitude)
-        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)")
+        v = math.inf if g == math.inf else number(g, "friction g (the Tresca slip threshold)", "nonnegative")
         object.__setattr__(self, "g", v)
 
 
@@ -307,6 +321,8 @@ class Scene:
             for body in self.bodies:
                 if body.material.E is None:
                     raise SceneError("the 'hertz' exact field needs isotropic materials (E, nu)")
+        if self.exact is not None and self.exact.declared_for is None:  # declared for this scene
+            object.__setattr__(self, "exact", replace(self.exact, declared_for=problem_entries(self)))
 
     @property
     def upper(self) -> Body:
@@ -330,6 +346,27 @@ class Scene:
         return self.upper.face.value(x) - self.lower.face.value(x) + self.gap_profile.value(x)
 
     @property
+    def exact_mismatch(self) -> str | None:
+        """Why the scene's exact field does not solve this scene, or ``None`` (it does, or there is
+        none): the entries of :func:`problem_entries` that differ from those the field was declared
+        for, except those the field follows by itself (:func:`follows_exact`)."""
+        ex = self.exact
+        if ex is None:
+            return None
+        was = dict(ex.declared_for)
+        if WHY in was:
+            return was[WHY]
+        now = dict(problem_entries(self))
+        skip = follows_exact(self)
+        changed = [k for k in dict.fromkeys([*was, *now])
+                   if k not in skip and was.get(k, _ABSENT) != now.get(k, _ABSENT)]
+        if not changed:
+            return None
+        names = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
+        return (f"the exact field ({ex.kind}) was declared for the scene before these changed: {names}; it does "
+                "not solve this problem")
+
+    @property
     def x_extent(self) -> tuple[float, float]:
         return (min(b.x_range[0] for b in self.bodies), max(b.x_range[1] for b in self.bodies))
 
@@ -339,6 +376,49 @@ class Scene:
         x0, x1 = self.x_extent
         heights = [float(np.max(b.height(np.linspace(*b.x_range, 101)))) for b in self.bodies]
         return max(x1 - x0, *heights)
+
+
+WHY = "why"  # a declared_for holding only the reason the field does not apply (see convert_units)
+_ABSENT = object()
+
+
+def problem_entries(scene: Scene) -> tuple[tuple[str, object], ...]:
+    """The continuous problem of ``scene`` entry by entry, named as in a scene file: geometry,
+    materials, supports and loads, the contact interval, gap and friction, and the exact field's
+    own parameters. What only shapes the mesh (``mesh.*``, ``layers``, ``focus_depth``), names,
+    descriptions and unit labels are not part of it: they never change what the field solves."""
+    items: list[tuple[str, object]] = [("plane", scene.upper.material.plane)]
+    for b in scene.bodies:
+        w = f"bodies.{b.name}"
+        items += [(f"{w}.position", b.position), (f"{w}.x", b.x_range), (f"{w}.far", b.far), (f"{w}.face", b.face),
+                  (f"{w}.material", b.material.C), (f"{w}.body_force", b.body_force)]
+        items += [(f"{w}.boundary.{p.name or i}", (p.on, p.kind, p.traction, p.interval))
+                  for i, p in enumerate(b.boundary)]
+    items += [("contact.interval", scene.contact), ("contact.gap", scene.gap), ("contact.friction", scene.friction)]
+    ex = scene.exact
+    if ex is not None:
+        items += [("exact.kind", ex.kind), ("exact.stress", ex.stress), ("exact.R", ex.R), ("exact.load", ex.load),
+                  ("exact.xc", ex.xc), ("exact.any_material", ex.any_material)]
+    return tuple(items)
+
+
+def follows_exact(scene: Scene) -> set[str]:
+    """The entries of :func:`problem_entries` that the exact field of ``scene`` follows, so that
+    changing them keeps it the solution. A ``hertz`` field is computed from ``R``, ``load`` and the
+    materials (and its gap from ``R``): it follows them when every load of the scene is its own
+    traction (``kind = "exact"``, no body force), else a fixed load would no longer match it. A
+    ``uniform`` field declared with ``any_material`` follows isotropic materials."""
+    ex = scene.exact
+    materials = {f"bodies.{b.name}.material" for b in scene.bodies}
+    isotropic = all(b.material.E is not None for b in scene.bodies)
+    if ex is None or not isotropic:
+        return set()
+    if ex.kind == "hertz":
+        own_loads = all(p.traction.kind == "exact" for b in scene.bodies for p in b.boundary if p.kind == "traction")
+        if own_loads and not any(any(b.body_force) for b in scene.bodies):
+            return {"exact.R", "exact.load", "plane", *materials}
+        return set()
+    return materials if ex.any_material else set()
 
 
 def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, str]) -> Scene:
@@ -373,9 +453,12 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
                    for b in scene.bodies)
     ex = scene.exact
     if ex is not None:
+        # the converted field solves the converted scene if and only if the field solved the scene
+        why = scene.exact_mismatch
         ex = replace(ex, stress=None if ex.stress is None else tuple(v * stress for v in ex.stress),
                      R=None if ex.R is None else ex.R * length,
-                     load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length)
+                     load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length,
+                     declared_for=None if why is None else ((WHY, why),))
     fr = scene.friction
     if fr is not None:
         fr = replace(fr, g=fr.g * stress)  # inf stays inf: full stick in any units

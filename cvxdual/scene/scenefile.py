@@ -10,7 +10,10 @@ an unknown key is an error that names it. The format is documented in docs/scene
 from __future__ import annotations
 
 import copy
+import os
+import stat
 import tomllib
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -18,7 +21,7 @@ from ..errors import SceneError
 from ..validate import integer, number, short, table, text
 from .materials import Material
 from .profiles import profile_from_dict
-from .scene import Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction
+from .scene import WHY, Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction, problem_entries
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
@@ -26,7 +29,7 @@ PART_KEYS = {"on", "kind", "traction", "interval"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
 CONTACT_KEYS = {"interval", "gap", "friction"}
 FRICTION_KEYS = {"kind", "g"}
-EXACT_KEYS = {"kind", "stress", "R", "load", "xc"}
+EXACT_KEYS = {"kind", "stress", "R", "load", "xc", "any_material"}
 MESH_KEYS = {"columns", "focus", "grading", "default_level"}
 TRACTION_KEYS = {"kind", "value"}
 
@@ -46,8 +49,11 @@ MAX_DEPTH = 32  # a scene nests about 5 tables deep; far deeper input is refused
 def builtin_data(name) -> dict:
     """The raw dict of a built-in scene, as read from its TOML file."""
     if not isinstance(name, str) or name not in builtin_names():
+        # a bare name is a built-in scene's; a file of that name here is read only as a path
+        here = isinstance(name, str) and name and os.path.lexists(name)
         raise SceneError(f"unknown scene {short(name)}; built-in scenes: {', '.join(builtin_names())} "
-                         "(or give a path to a .toml file)")
+                         + (f"(a file {short(name)} is here: give it as ./{name} to read it)" if here else
+                            "(or give a path to a .toml file)"))
     return tomllib.loads(resources.files("cvxdual.scene.data").joinpath(f"{name}.toml").read_text())
 
 
@@ -131,10 +137,30 @@ def _path_text(path: Path, limit: int = 100) -> str:
     return text_ if len(text_) <= limit else "'..." + text_[len(text_) - limit + 4:]
 
 
+def _not_a_file(path: Path) -> str | None:
+    """What keeps ``path`` from being read as a scene file, as the end of a sentence naming it
+    (``"does not exist"``, ``"is a directory"``, ...), or ``None`` for a regular file."""
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return ("does not exist" + (" (a symbolic link to nothing)" if os.path.islink(path) else "")
+                + f"; check the path, or name a built-in scene ({', '.join(builtin_names())})")
+    except PermissionError:
+        return "cannot be reached: a directory on its path is not readable by you; check the permissions"
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    if stat.S_ISDIR(mode):
+        return "is a directory, not a scene file; give the path of a .toml file"
+    if not stat.S_ISREG(mode):
+        return "is not a regular file (a device, a pipe or a socket); give the path of a .toml file"
+    return None
+
+
 def _read_file(path: Path, where: str) -> dict:
     """The raw dict of scene file ``path`` (``where`` names it in messages)."""
-    if not path.is_file():
-        raise SceneError(f"{where} does not exist")
+    problem = _not_a_file(path)
+    if problem is not None:
+        raise SceneError(f"{where} {problem}")
     try:
         return _toml(path.read_text(encoding="utf-8"), where)
     except UnicodeDecodeError:
@@ -165,10 +191,13 @@ def _base_data(ref, holder: Path | None, holder_name: str) -> tuple[dict, Path |
                              "built-in scene name, or load the scene from a file")
         path = holder.parent / path
     where = f"scene file {_path_text(path)}"
-    if not path.is_file():
+    problem = _not_a_file(path)
+    if problem is not None and problem.startswith("does not exist"):
         rel = " (relative to the directory of the file holding the base line)" if relative else ""
         raise SceneError(f"{holder_name}: base {short(ref)} does not exist: no file {_path_text(path)}; "
                          f"fix the path{rel} or name a built-in scene ({', '.join(builtin_names())})")
+    if problem is not None:
+        raise SceneError(f"{holder_name}: base {short(ref)}: {_path_text(path)} {problem}")
     return _read_file(path, where), path, where
 
 
@@ -199,6 +228,7 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         seen = [f"built-in scene {str(source)!r}"]
     data = copy.deepcopy(data)
     chain = [name]
+    files = [data]  # the raw tables of the chain, outermost first
     while "base" in data:
         ref = data.pop("base")
         base, holder, name = _base_data(ref, holder, name)
@@ -207,13 +237,33 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         if key in seen:
             raise SceneError(f"scene bases form a cycle: {' -> '.join(chain)}; remove one of these base lines")
         seen.append(key)
+        files.append(base)
         data = merge(base, data)
     for o in overrides or []:
         _check_depth(o, "an override")
         if isinstance(o, dict) and "base" in o:
             raise SceneError("an override cannot change 'base'; start from the other scene instead")
         data = merge(data, table(o, "an override"))
-    return scene_from_dict(data)
+    scene = scene_from_dict(data)
+    # The exact field solves the scene of the outermost file with an [exact] table: a file that
+    # starts from that one, and the overrides, change the problem without making the field solve it.
+    at = next((i for i, f in enumerate(files) if "exact" in f), None)
+    if scene.exact is not None and at is not None and (at > 0 or overrides):
+        try:
+            declared = problem_entries(scene_from_dict(_merged(files[at:])))
+        except SceneError as e:
+            declared = ((WHY, f"the exact field is declared in {chain[at]}, which is not a valid scene on its "
+                               f"own ({e})"),)
+        scene = replace(scene, exact=replace(scene.exact, declared_for=declared))
+    return scene
+
+
+def _merged(files: list[dict]) -> dict:
+    """The table of a chain of raw scene tables (outermost first), merged as :func:`load_scene` does."""
+    data = {k: v for k, v in files[0].items() if k != "base"}
+    for base in files[1:]:
+        data = merge({k: v for k, v in base.items() if k != "base"}, data)
+    return data
 
 
 def _check_keys(d, allowed: set[str] | None, where: str) -> dict:
@@ -248,10 +298,10 @@ def scene_from_dict(data: dict) -> Scene:
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
         exact = ExactSpec(kind=text(_need(e, "kind", "exact"), "exact.kind"), stress=e.get("stress"), R=e.get("R"),
-                          load=e.get("load"), xc=e.get("xc", 0.0))
+                          load=e.get("load"), xc=e.get("xc", 0.0), any_material=e.get("any_material", False))
     m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
     mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
-                    grading=number(m.get("grading", 1.0), "mesh.grading"),
+                    grading=number(m.get("grading", 1.0), "mesh.grading", 1.0),
                     default_level=integer(m.get("default_level", 3), "mesh.default_level"))
     return Scene(name=data.get("name", "scene"), bodies=bodies, description=data.get("description", ""),
                  contact=contact.get("interval"), gap=gap, exact=exact, mesh=mesh, units=tuple(units),
@@ -296,4 +346,4 @@ def _body(name: str, d: dict, plane: str) -> Body:
                 face=profile_from_dict(_need(d, "face", where), f"{where}.face"),
                 material=material, boundary=tuple(parts), body_force=d.get("body_force", (0.0, 0.0)),
                 layers=integer(d.get("layers", 4), f"{where}.layers"),
-                focus_depth=None if focus_depth is None else number(focus_depth, f"{where}.focus_depth"))
+                focus_depth=None if focus_depth is None else number(focus_depth, f"{where}.focus_depth", "positive"))

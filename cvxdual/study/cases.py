@@ -60,16 +60,33 @@ def _numbers_ok(row: dict) -> bool:
                for k, v in row.items() if k in NUMERIC or k.startswith(NUMERIC_PREFIXES))
 
 
+def within_tolerances(residuals: dict, stress_space: str) -> bool:
+    """Whether ``residuals`` (by name; a missing or ``None`` one fails) meet the tolerances every
+    returned solution of ``stress_space`` promises."""
+    from ..solution import EQ_TOLERANCES, TOLERANCES
+    tol = EQ_TOLERANCES if stress_space == "eq" else TOLERANCES
+    return all(residuals.get(k) is not None and residuals[k] <= v for k, v in tol.items())
+
+
+def _flag_holds(row: dict) -> bool:
+    """A row's ``within_tolerances`` is what its own residuals say (a row without one: no solve)."""
+    if "within_tolerances" not in row:
+        return True
+    res = {k[len("res_"):]: v for k, v in row.items() if k.startswith("res_")}
+    return row["within_tolerances"] is within_tolerances(res, row.get("stress_space"))
+
+
 def load_case_row(cache: Cache, key: str, case: Case) -> dict | None:
-    """The cached row of ``case``, or ``None``: besides the entry's own checks (key, checksum),
-    the columns the study computes with have their types, the row is this case's (its
-    identity columns), its errors against a finer reference are finite numbers, and its saved
-    stresses (``compare``) load and fit its mesh."""
+    """The cached row of ``case``, or ``None``: besides the entry's own checks (key, MAC), the
+    columns the study computes with have their types, the row is this case's (its identity
+    columns), its ``within_tolerances`` agrees with its residuals, its errors against a finer
+    reference are finite numbers, and its saved stresses (``compare``) load and fit its mesh."""
     from ..files import to_jsonable as clean
     base = clean(base_row(case))
 
     def ok(row: dict) -> bool:
         return (_typed(row, ROW_TYPES) and _numbers_ok(row) and all(row.get(k) == base[k] for k in IDENTITY)
+                and _flag_holds(row)
                 and (case.reference.kind != "finer" or case.solver == "limit" or _typed(row, MEASURED))
                 and (not case.save_stress or case.stress_space != "p0"
                      or (row.get("stress_key") == "s" + key
@@ -305,8 +322,12 @@ def compute_row(case: Case, ref_info: dict | None, cache_root: str | None, key: 
 
 
 def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
-    from .. import solve
+    from .. import exact_reference, solve
     scene = scene_of(case.scene_source, case.overrides, case.units)
+    why = exact_reference(scene)[1] if case.reference.kind == "exact" else None
+    if why is not None:  # before the solve: the case asks for what cannot be measured
+        raise StudyError(f"this case asks for errors against the exact field, but {why}; measure against "
+                         "reference = \"none\" or a finer level, or declare the field in the changed scene")
     if case.solver == "limit":
         return _limit(case, scene)
     kw = dict(case.solver_options)
@@ -347,18 +368,16 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
 
 def solution_fields(sol) -> dict:
     """The generic columns of a solved case."""
-    from ..solution import EQ_TOLERANCES, TOLERANCES
     c, t, res = sol.contact, sol.timings, sol.residuals
     active = np.asarray(c["active"]).astype(int)
     summary = sol.summary()
-    tol = EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
     return {
         "status": sol.solver.get("status"), "n_pieces": int(summary["n_pieces"]),
         "n_stress_unknowns": int(summary["n_stress_unknowns"]), "n_dofs": int(sol.system.n_dofs),
         "h": float(sol.mesh.h), "h_min": float(sol.mesh.h_min), "h_ratio": float(sol.mesh.h_min / sol.mesh.h),
         "iterations": sol.solver.get("iterations"), "duality_gap": float(sol.duality_gap),
         **{f"res_{k}": float(v) for k, v in res.items()},
-        "within_tolerances": bool(all(res.get(k, np.inf) <= v for k, v in tol.items())),
+        "within_tolerances": within_tolerances(res, sol.stress_space),
         "n_active": int(c["n_active"]), "contact_x_min": c["x_min"], "contact_x_max": c["x_max"],
         "peak_pressure": c["max_pressure"], "total_force": c["total_force"],
         "n_patches": int(np.sum(np.diff(np.r_[0, active]) == 1)),
@@ -379,14 +398,14 @@ def _certificate(sol) -> dict:
 
 
 def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:
-    from .. import exact_field
+    from .. import exact_reference
     from ..p0.norms import stress_error
     m = dict(case.metrics)
     out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
            "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
     ref = case.reference
     if ref.kind == "exact":
-        ex = exact_field(scene)
+        ex = exact_reference(scene)[0]  # one that does not solve the scene failed the case before the solve
         if ex is None:
             if sol.error is None:
                 return out  # no exact field: nothing to measure (e.g. a stability case on blocks)

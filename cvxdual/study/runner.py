@@ -101,7 +101,8 @@ def _run(study: Study, root: Path, scheduler, workers, memory_limit, quiet: bool
         r = repr(sc)
         cases.append(c)
         reprs.append(r)
-        keys.append(case_key(c, r, hh))
+        # whether the exact field applies is not in the scene's repr (it depends on where it was declared)
+        keys.append(case_key(c, f"{r} exact field: {sc.exact_mismatch or 'applies'}", hh))
     rows: dict = {}
     todo = []
     for i, k in enumerate(keys):
