@@ -141,4 +141,12 @@ def _equilibrium(df: pd.DataFrame, all_r: pd.DataFrame) -> list[str]:
     for scene in sorted(set(eq.scene)):
         r1, r2 = _rate(all_r, scene, "type1", "eq"), _rate(all_r, scene, "type2", "eq")
         lines.append(f"- `{scene}`, eq rates (relative L2, all levels): type 1 {r1:.2f}, type 2 {r2:.2f}.")
+    # an eq row within a few times the reference's own error measures the reference as much as itself
+    close = m[m["error_l2_rel"] < 3.0 * m["reference_error_est"]]
+    if len(close):
+        lines.append("- Rows whose eq error is less than 3 times the reference's estimated error (the error "
+                     "against the reference mixes both, and the rates above flatten there; the certified bound "
+                     "is the measure at those levels): "
+                     + ", ".join(f"`{r.scene}` {r.triangulation} level {int(r.level)}" for r in close.itertuples())
+                     + ".")
     return lines + [""]
