@@ -198,6 +198,8 @@ def test_peer_verdict(tmp_path, monkeypatch, scale, reason, speed, crash, error)
         assert "- solve time: met at 4 of 4" in md and "| 0.5 |" in md and "Missed" not in md
     elif error is None:  # the peer twice as fast: every comparison missed, and each missed level explained
         assert "- total time: met at 0 of 4; missed" in md and "| 2 |" in md
-        assert "Missed on solve time at level 0" in md and "Missed on total time at level 1" in md
+        # which level is "the fastest reaching a target" follows cvxdual's own timings (level 0 or 1
+        # on a loaded machine), so the explanation is checked per basis, not per level
+        assert "Missed on solve time at level " in md and "Missed on total time at level " in md
     if crash == 1:
         assert "stand-in peer: crashed" in md and rows[-1]["status"] == "failed: no result"
