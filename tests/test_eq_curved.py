@@ -292,3 +292,19 @@ def test_field_distance_in_chunks_equals_one_pass(monkeypatch):
         # the same sums added in another order: rounding only
         assert whole["l2"] > 0 and chunked["l2"] == pytest.approx(whole["l2"], rel=1e-12)
         assert chunked["energy"] == pytest.approx(whole["energy"], rel=1e-12)
+
+
+def test_field_at_sub_triangle_centroids_is_the_vertex_mean():
+    """``StressField.at`` finds the sub-triangle of a point from the macro triangle's barycentric
+    coordinates: at every sub-triangle's centroid it must return the mean of that sub-triangle's
+    vertex values, and name that sub-triangle as the cell."""
+    from cvxdual.eq import fields
+    f = fields.StressField.of(solved("cylinder-in-groove", "type1", 1))
+    sub = f.space.sub_points()  # (n_sub, 3, 2)
+    c = sub.mean(1)
+    body = np.repeat(f.space.body, 3)
+    vals, cell = f.at(c, body, 1e-10 * f.scene.length_scale)
+    expected = f.stress.reshape(-1, 3, 3).mean(1)
+    scale = np.abs(f.stress).max()
+    assert np.array_equal(cell, np.arange(len(sub)))
+    assert np.abs(vals - expected).max() <= 1e-12 * scale  # a linear function at a centroid: rounding only
