@@ -4,7 +4,7 @@
     python studies/bounds.py --quick           # coarse sizes, into out/bounds-quick
     python studies/bounds.py --scheduler tcp://HOST:8786   # on a running Dask scheduler
 
-Same as `cvxdual study run studies/specs/bounds.py --out reports --workers 1 --memory-limit 16GB`;
+Same as `cvxdual study run studies/specs/bounds.py --out reports --memory-limit 8GB`;
 interrupted runs resume from the cache (.cache/cvxdual).
 """
 
@@ -12,8 +12,8 @@ import sys
 
 from run_study import run_spec
 
-# the curved scenes' eq references at level 6 need up to ~10 GB (reports/memory.md): one at a time
-FULL = {"--workers": "1", "--memory-limit": "16GB"}
+# the eq space at level 5 peaks at 2.6 GB (reports/memory.md)
+FULL = {"--memory-limit": "8GB"}
 
 if __name__ == "__main__":
     sys.exit(run_spec("bounds", FULL))
