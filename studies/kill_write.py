@@ -74,23 +74,6 @@ def forked_write(sol, target: Path) -> float:
     return time.perf_counter() - t0
 
 
-def killed_write(sol, target: Path, delay: float) -> tuple[bool, float]:
-    """Fork a child writing ``sol`` to ``target``, SIGKILL it ``delay`` s after the fork; return
-    (killed before it finished, seconds after the fork when the kill was sent)."""
-    t0 = time.perf_counter()
-    pid = os.fork()
-    if pid == 0:
-        try:
-            write_outputs(sol, target)
-        finally:
-            os._exit(0)
-    time.sleep(max(0.0, t0 + delay - time.perf_counter()))
-    at = time.perf_counter() - t0
-    os.kill(pid, signal.SIGKILL)
-    _, status = os.waitpid(pid, 0)
-    return os.WIFSIGNALED(status), at
-
-
 def stagings(parent: Path, target: Path) -> int:
     """Staging directories of ``target`` in ``parent`` (a writer's own, or a killed one's)."""
     try:
@@ -100,9 +83,10 @@ def stagings(parent: Path, target: Path) -> int:
     return sum(n.startswith((f".{target.name}.stage-", f".{target.name}.old-")) for n in names)
 
 
-def polled_kill(sol, target: Path, delay: float) -> tuple[bool, float, int]:
-    """As :func:`killed_write`, polling the staging directories until the kill; returns (killed,
-    seconds after the fork when the kill was sent, most staging directories seen, after it too)."""
+def killed_write(sol, target: Path, delay: float) -> tuple[bool, float, int]:
+    """Fork a child writing ``sol`` to ``target`` and SIGKILL it ``delay`` s after the fork,
+    polling the staging directories meanwhile; returns (killed before it finished, seconds after
+    the fork when the kill was sent, most staging directories seen, after the kill too)."""
     parent = target.parent
     most = stagings(parent, target)
     t0 = time.perf_counter()
@@ -159,7 +143,7 @@ def main(argv=None) -> int:
     for i in range(1, args.trials + 1):
         held = next(k for k, h in refs.items() if h == digest(target))
         other = "B" if held == "A" else "A"
-        killed, at = killed_write(sols[other], target, rng.uniform(0.0, 1.1 * T))
+        killed, at, _ = killed_write(sols[other], target, rng.uniform(0.0, 1.1 * T))
         got = digest(target)
         outcome = next((k for k, h in refs.items() if h == got), "missing" if got is None else "MIX")
         before = leftovers(parent, target)
@@ -179,7 +163,7 @@ def main(argv=None) -> int:
     while in_row < args.in_a_row and attempt < 3 * args.in_a_row:
         attempt += 1
         other = "B" if attempt % 2 else "A"
-        killed, at, most = polled_kill(sols[other], target, rng.uniform(0.05 * T_min, 0.9 * T_min))
+        killed, at, most = killed_write(sols[other], target, rng.uniform(0.05 * T_min, 0.9 * T_min))
         in_row = in_row + 1 if killed else 0
         got = digest(target)
         outcome = next((k for k, h in refs.items() if h == got), "missing" if got is None else "MIX")
