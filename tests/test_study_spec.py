@@ -193,3 +193,18 @@ def test_report_names_a_command_a_reader_can_retype(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert shown_path(tmp_path / "specs" / "s.toml") == "specs/s.toml"  # inside: relative, runnable from here
     assert shown_path(Path("/elsewhere/s.toml")) == "s.toml"  # outside: only the name
+
+
+def test_bounds_report_time_to_target_interpolates_and_extrapolates():
+    """``t = 2 e^-2`` exactly: a bracketed target is found by interpolation, one below the finest
+    level by the fitted power law (both exact for a power law, up to rounding), and each says how."""
+    from cvxdual.study.spec import load_module
+    rep = load_module(SPECS / "_bounds_report.py")
+    e = np.array([0.4, 0.2, 0.1, 0.05])
+    d = pd.DataFrame({"level": [0, 1, 2, 3], "error_l2_rel": e, "t_total": 2.0 * e**-2.0})
+    t, how = rep._time_to(d, 0.15)
+    assert how == "interpolated" and t == pytest.approx(2.0 / 0.15**2, rel=1e-12)
+    t, how = rep._time_to(d, 0.01)
+    assert how.startswith("extrapolated from levels 1-3") and t == pytest.approx(2.0e4, rel=1e-10)
+    t, how = rep._time_to(d.iloc[:2], 0.01)  # two levels: no fit is trusted
+    assert np.isnan(t) and how.startswith("not reached")
