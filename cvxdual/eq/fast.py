@@ -58,6 +58,12 @@ REFINE_STEPS, REFINE_TOL = 3, 1e-15  # iterative refinement of the condensed sol
 # step's threshold (eq.space.PROJECT_TOL) or stalls: one takes 1e-10 to ~5e-14 at levels 3-5 (nu =
 # 0.3); near incompressibility each gains ~3 orders (nu = 0.4999: 4e-2, 2e-5, 7e-9, ...)
 CORRECTIONS = 8
+# condition number of a body's compliance (2 / (1 - 2 nu) for an isotropic one in plane strain)
+# above which its triangles take the local KKT route, not the closed form: the closed form loses
+# about a digit more, which near incompressibility shows (patch at nu = 0.4999, level 3: exact to
+# 4e-8 against 3e-9; hertz level 5: eq L2 error 4.4e-4 against 3.9e-4). 1e3 is nu ~ 0.499;
+# at nu = 0.49 (condition 100) both routes agree to every reported digit
+CLOSED_FORM_COND = 1e3
 
 
 def symmetric_product(L: sp.spmatrix, x: np.ndarray) -> np.ndarray:
@@ -124,6 +130,12 @@ def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, firs
     return yy[piv[: r.shape[2]]]
 
 
+def well_conditioned(space: EquilibriumSpace) -> np.ndarray:
+    """Per body: whether its compliance's condition number is at most ``CLOSED_FORM_COND`` (its
+    plain triangles may then be condensed in closed form)."""
+    return np.array([np.linalg.cond(b.material.compliance) <= CLOSED_FORM_COND for b in space.scene.bodies])
+
+
 def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
     """``(n_c, 2, m)``: jump ``[r_y]`` at each contact parameter of the rigid motions of each
     body alone; the parameters in contact must stop every motion that separates the bodies."""
@@ -155,7 +167,8 @@ class HybridSolver:
 
     def __init__(self, space: EquilibriumSpace, closed_form: bool = True):
         """``closed_form=False`` solves every triangle's local KKT system, none in closed form (an
-        independent route to the same solution, for tests)."""
+        independent route to the same solution, for tests); a nearly incompressible body's
+        triangles always take that route (``CLOSED_FORM_COND``)."""
         t0 = time.perf_counter()
         self.space = space
         sc = space.scales
@@ -188,6 +201,7 @@ class HybridSolver:
         # plain triangles: every edge slot free, none on a contact face or under a column; their
         # local problem is the reference element's, solved in closed form (_plain_setup)
         plain = (self.ys[:, :12] >= 0).all(1) & ~on_face.any(1) & closed_form
+        plain &= well_conditioned(space)[space.body]
         plain[column_slots(space)[0]] = False
         self.plain = np.flatnonzero(plain)
         self.special = np.flatnonzero(~plain)  # the general local KKT systems
