@@ -196,15 +196,17 @@ def test_report_names_a_command_a_reader_can_retype(tmp_path, monkeypatch):
 
 
 def test_bounds_report_time_to_target_interpolates_and_extrapolates():
-    """``t = 2 e^-2`` exactly: a bracketed target is found by interpolation, one below the finest
-    level by the fitted power law (both exact for a power law, up to rounding), and each says how."""
+    """A power law ``e = 40 n^-0.5`` with time ``t = 1e-3 n`` in the pieces ``n``: a bracketed
+    target is found by interpolation, one below the finest level by the fitted law (both exact
+    for these data, up to rounding), and each says how."""
     from cvxdual.study.spec import load_module
     rep = load_module(SPECS / "_bounds_report.py")
-    e = np.array([0.4, 0.2, 0.1, 0.05])
-    d = pd.DataFrame({"level": [0, 1, 2, 3], "error_l2_rel": e, "t_total": 2.0 * e**-2.0})
-    t, how = rep._time_to(d, 0.15)
-    assert how == "interpolated" and t == pytest.approx(2.0 / 0.15**2, rel=1e-12)
-    t, how = rep._time_to(d, 0.01)
-    assert how.startswith("extrapolated from levels 1-3") and t == pytest.approx(2.0e4, rel=1e-10)
+    n = 100.0 * 4.0 ** np.arange(4)
+    e = 40.0 * n**-0.5
+    d = pd.DataFrame({"level": [0, 1, 2, 3], "n_pieces": n, "error_l2_rel": e, "t_total": 1e-3 * n})
+    t, how = rep._time_to(d, 1.0)  # between levels 1 and 2: n = 1600, t = 1.6
+    assert how == "interpolated" and t == pytest.approx(1.6, rel=1e-12)
+    t, how = rep._time_to(d, 0.01)  # n = (40 / 0.01)^2 = 1.6e7 pieces
+    assert how.startswith("extrapolated: error ~ pieces^-0.50 over levels 1-3") and t == pytest.approx(1.6e4, rel=1e-10)
     t, how = rep._time_to(d.iloc[:2], 0.01)  # two levels: no fit is trusted
     assert np.isnan(t) and how.startswith("not reached")
