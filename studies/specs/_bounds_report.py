@@ -213,6 +213,7 @@ def _curved_findings(d: pd.DataFrame, setup: Setup) -> list[str]:
 
 def _plot(d: pd.DataFrame, out, curved: tuple[str, ...]) -> None:
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     from cvxdual.files import atomic_path
     h = d[d.scene == "hertz"]
@@ -249,6 +250,7 @@ def _plot(d: pd.DataFrame, out, curved: tuple[str, ...]) -> None:
             ax.set_xlabel("mesh size h [mm]")
             ax.set_ylabel("relative error [-]")
             ax.grid(alpha=0.3, which="both")
+            ax.xaxis.set_minor_formatter(NullFormatter())  # less than a decade of h: minor labels collide
             if ax.lines:  # a scene left out of a partial run draws nothing
                 ax.legend(fontsize=7)
         with atomic_path(out / "bounds_curved.png") as tmp:
@@ -256,6 +258,7 @@ def _plot(d: pd.DataFrame, out, curved: tuple[str, ...]) -> None:
 
 
 def _label(axes, scene: str, titles) -> None:
+    from matplotlib.ticker import NullFormatter
     labels = (("mesh size h [mm]", "relative L2 stress error"),
               ("mesh size h [mm]", "energy-norm error [sqrt(N mm / mm)]"),
               ("wall time per solve [s]", "relative L2 stress error"))
@@ -264,4 +267,5 @@ def _label(axes, scene: str, titles) -> None:
         ax.set_ylabel(yl)
         ax.set_title(f"{scene}: {title}", fontsize=10)
         ax.grid(alpha=0.3, which="both")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.legend(fontsize=8)
