@@ -187,9 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "SCS above, Clarabel taking over where SCS fails)")
     s.add_argument("--stress-space", default="p0", choices=("p0", "eq"),
                    help="p0: the paper's piecewise-constant stresses; eq: exactly admissible equilibrium "
-                   "stresses with certified bounds, flat faces only (default: p0)")
+                   "stresses with certified bounds, frictionless (default: p0)")
     s.add_argument("--bounds", action="store_true", help="with p0: also certify the displacement against "
-                   "equilibrium stresses (flat faces only)")
+                   "equilibrium stresses on the same mesh")
     s.add_argument("--out", default=None, help="output directory (default: out/<scene>)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.grading=4 (repeatable)")

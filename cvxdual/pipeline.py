@@ -58,7 +58,7 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
                 stress_space: str = "p0"):
     """Mesh, assemble and build the CVXPY dual of ``scene`` without solving it: a
     :class:`~cvxdual.p0.dual.DualModel` (with the scene's friction, if it has any), or with
-    ``stress_space="eq"`` an :class:`~cvxdual.eq.model.EquilibriumModel` (flat faces, frictionless)."""
+    ``stress_space="eq"`` an :class:`~cvxdual.eq.model.EquilibriumModel` (frictionless)."""
     scene = as_scene(scene)
     triangulation = check_triangulation(triangulation)
     if check_stress_space(stress_space) == "eq":
@@ -85,7 +85,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     (:func:`cvxdual.model.solvers.default_solver`: Clarabel, SCS from 2e4 pieces), handing over to
     Clarabel where it fails; options alone go to Clarabel.
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
-    stresses on flat-face scenes, with certified bounds; docs/equilibrium.md). ``bounds`` also
+    stresses, column stresses on curved pieces, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
     ``check`` false returns solutions that fail the accuracy checks (for studies of them).
     Where the fast path (or the default solver) fails (its checks, a cycling active set), the

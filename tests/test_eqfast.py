@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
+from cvxdual.eq.balance import PROJECT_TOL
 from cvxdual.eq.bounds import admissibility_residuals
 from cvxdual.eq.fast import (
     HybridSolver,
@@ -17,7 +18,7 @@ from cvxdual.eq.fast import (
     solve_eq_fast,
 )
 from cvxdual.eq.model import EquilibriumModel
-from cvxdual.eq.space import PROJECT_TOL, EquilibriumSpace
+from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.errors import SolverError
 
 # Clarabel stops at relative gaps ~1e-8: its stresses differ from the exact optimum by ~1e-8-1e-7

@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 import cvxdual as cd
+from cvxdual.eq.balance import make_exact, rigid_motions
 from cvxdual.eq.bounds import (
     admissibility_residuals,
     admissible_displacement,
@@ -37,7 +38,7 @@ from cvxdual.eq.element import (
     sub_vertices,
 )
 from cvxdual.eq.model import EquilibriumModel
-from cvxdual.eq.space import EquilibriumSpace, make_exact, rigid_motions
+from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.geometry.boundary import supported
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision

@@ -25,8 +25,9 @@ from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
 from ..voigt import VOIGT_WEIGHT
 from .columns import CONCAVE1, column_gap
+from .edges import outward_normals
 from .element import MASS0, bary_gradients, frame_rows, internal_rows
-from .space import FIXED, N_GAUSS, EquilibriumSpace, outward_normals
+from .space import FIXED, N_GAUSS, EquilibriumSpace
 
 ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"
 # points per direction per sub-triangle for the errors against an exact field: 9 points change

@@ -34,6 +34,7 @@ from ..errors import SolverError
 from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
+from .balance import PROJECT_TOL, make_exact, rigid_motions
 from .element import (
     MASS0,
     REF_DIV_PINV,
@@ -48,14 +49,14 @@ from .element import (
     reference_energy,
     sub_vertices,
 )
-from .space import PROJECT_TOL, EquilibriumSpace, make_exact, rigid_motions
+from .space import EquilibriumSpace
 
 CHUNK = 16384  # triangles per batched local inversion: bounds the temporaries (21 x 21 each)
 SET_TOL = 1e-10  # relative size of p or nu below which the contact state is left as it is (rounding)
 RESIDUAL_TOL = 1e-8  # relative residual of the condensed solve above which it is not trusted
 REFINE_STEPS, REFINE_TOL = 3, 1e-15  # iterative refinement of the condensed solve, until rounding
 # correction solves of the final field's equilibrium residual, until it is below the exactness
-# step's threshold (eq.space.PROJECT_TOL) or stalls: one takes 1e-10 to ~5e-14 at levels 3-5 (nu =
+# step's threshold (eq.balance.PROJECT_TOL) or stalls: one takes 1e-10 to ~5e-14 at levels 3-5 (nu =
 # 0.3); near incompressibility each gains ~3 orders (nu = 0.4999: 4e-2, 2e-5, 7e-9, ...)
 CORRECTIONS = 8
 # condition number of a body's compliance (2 / (1 - 2 nu) for an isotropic one in plane strain)

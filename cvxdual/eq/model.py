@@ -6,7 +6,7 @@
 data hold by construction; the rows are ``div sigma + load_factor F = 0`` and compressive
 frictionless contact ``sigma_nn <= 0``. The default objective is ``S(sigma) + L(u0)``: the
 complementary energy with the gap term. After every solve the field is made exactly
-admissible (:func:`~cvxdual.eq.space.make_exact`, per unit load), so its stresses are
+admissible (:func:`~cvxdual.eq.balance.make_exact`, per unit load), so its stresses are
 statically admissible to rounding whatever the user changed: a user's convex constraint on
 them (``shear_cap(k)``) holds at the vertices, where a convex function of a linear
 field is largest, hence everywhere.
@@ -23,8 +23,9 @@ from ..errors import AccuracyError, ModelError
 from ..model.base import USER_TOLERANCE, ConvexModel
 from ..solution import EQ_TOLERANCES, Solution, SolverStats, failed_checks
 from ..voigt import out_of_plane_factor
+from .balance import make_exact
 from .contact import edge_contact
-from .space import EquilibriumSpace, make_exact
+from .space import EquilibriumSpace
 
 
 class EquilibriumModel(ConvexModel):

@@ -38,17 +38,17 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import MeshError, SceneError, SolverError
-from ..geometry.boundary import supported
+from ..errors import MeshError, SceneError
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..geometry.quadrature import gauss01
-from ..geometry.rigid import candidates, check_balance
 from ..geometry.triangulation import discretize
 from ..linalg.sparse import assemble_blocks
 from ..p0.assembly import Scales
 from ..scene.scene import Scene
+from .balance import balance_loads, make_scales
 from .columns import FaceIntervals, check_column_data, column_energy, face_intervals, slab_interval
+from .edges import edge_ids, edge_keys, mesh_edges, outward_normals
 from .element import (
     MASS0,
     bary_gradients,
@@ -60,15 +60,10 @@ from .element import (
     piola,
     sub_vertices,
     traction_rows,
-    unit,
 )
 
 N_GAUSS = 10  # per edge: tractions and gap products (degree 19; exact for the built-in data)
 FREE, FIXED, CONTACT = 0, 1, 2  # kinds of the raw edge parameters
-# equilibrium residual (relative to the stress scale) below which the field is left as solved: an
-# order under the certificate's "exact to rounding" (eq.bounds.ADMISSIBLE_TOL) and above the
-# rounding of evaluating it (~5e-14 measured); a projection costs a factorisation of B B^T
-PROJECT_TOL = 1e-13
 
 
 @dataclass(frozen=True)
@@ -268,46 +263,6 @@ class EquilibriumSpace:
 
 
 # -- building the space ------------------------------------------------------------------
-
-def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
-    """Global edges of the macro triangles: end nodes ``lo < hi``, unit normals ``ng`` (the
-    direction ``hi - lo`` turned clockwise), the edge of each local edge ``id (n_T, 3)`` (local
-    edge ``j`` runs ``X_j -> X_{j+1}``), whether it runs ``hi -> lo`` (``flip``) and the owner
-    ``(t, j)`` of every edge that has one triangle (the boundary)."""
-    a, b = tri, np.roll(tri, -1, axis=1)
-    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
-    uniq, inv, count = np.unique(keys.ravel(), return_inverse=True, return_counts=True)
-    lo, hi = uniq // n_nodes, uniq % n_nodes
-    d = pts[hi] - pts[lo]
-    ng = unit(np.stack([d[:, 1], -d[:, 0]], 1))
-    bnd = np.flatnonzero(count == 1)
-    owner = np.full((len(uniq), 2), -1)
-    owner[inv, 0], owner[inv, 1] = np.repeat(np.arange(len(tri)), 3), np.tile(np.arange(3), len(tri))
-    return {"keys": uniq, "lo": lo, "hi": hi, "ng": ng, "id": inv.reshape(tri.shape), "flip": a > b,
-            "count": count, "boundary": bnd, "owner": owner, "length": np.linalg.norm(d, axis=1)}
-
-
-def edge_keys(a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
-    return np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
-
-
-def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int, missing: bool = False) -> np.ndarray:
-    """The edges between nodes ``a`` and ``b``; with ``missing``, -1 where there is none."""
-    keys = edge_keys(a, b, n_nodes)
-    idx = np.minimum(np.searchsorted(edges["keys"], keys), len(edges["keys"]) - 1)
-    found = edges["keys"][idx] == keys
-    if not missing and not found.all():
-        raise MeshError("internal: a side edge is not an edge of the mesh")  # pragma: no cover
-    return np.where(found, idx, -1)
-
-
-def outward_normals(edges: dict, X: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Outward unit normals of boundary edges ``ids`` and ``s_o = n_g . n_out`` (+-1)."""
-    t = edges["owner"][ids, 0]
-    mid = 0.5 * (pts[edges["lo"][ids]] + pts[edges["hi"][ids]])
-    s_o = np.sign(np.einsum("ij,ij->i", mid - X[t].mean(1), edges["ng"][ids]))
-    return s_o[:, None] * edges["ng"][ids], s_o
-
 
 def part_edges(mesh: Mesh, edges: dict, k: int, part, skip: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Edges of a boundary part: both ends in the part's interval (x on face/far, y on
@@ -514,191 +469,3 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
 
 
 # -- rigid motions and load balance -------------------------------------------------------
-
-def node_body(mesh: Mesh) -> np.ndarray:
-    return np.concatenate([np.full(bm.n_nodes, k) for k, bm in enumerate(mesh.bodies)])
-
-
-def rigid_candidates(mesh: Mesh) -> np.ndarray:
-    """``(n_nodes, 2, 6)``: translations and rotation of each body (:func:`cvxdual.geometry.rigid.candidates`)."""
-    return candidates(mesh).reshape(mesh.n_nodes, 2, 6)
-
-
-def _null(rows: np.ndarray, n: int) -> np.ndarray:
-    if len(rows) == 0:
-        return np.eye(n)
-    _, s, vt = np.linalg.svd(rows, full_matrices=True)
-    rank = int(np.sum(s > 1e-9 * max(s[0], 1e-300)))
-    return vt[rank:].T
-
-
-def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
-    """Rigid motions allowed by the supports, ``(n_nodes, 2, m)``. ``joint``: of both bodies
-    together keeping ``[r_y] = 0`` on the contact pairs (the floating modes, on which the loads
-    must balance); otherwise of each body alone (with its contact tractions held fixed)."""
-    R = rigid_candidates(mesh)
-    fixed = supported(mesh)
-    rows = R[fixed]  # (n_fixed, 6)
-    if joint:
-        up, lo = mesh.pairs.T
-        coef = _null(np.concatenate([rows, R[lo, 1] - R[up, 1]]), 6)
-    else:
-        nb = node_body(mesh)
-        blocks = []
-        for k in range(2):
-            rk = R[fixed & (nb == k)[:, None]][:, 3 * k: 3 * k + 3]
-            nk = _null(rk, 3)
-            full = np.zeros((6, nk.shape[1]))
-            full[3 * k: 3 * k + 3] = nk
-            blocks.append(full)
-        coef = np.concatenate(blocks, axis=1)
-    return np.einsum("nij,jm->nim", R, coef)
-
-
-def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For displacements ``r (n_nodes, 2, m)`` linear on each triangle: the boundary work
-    ``int_bnd (sigma n).r ds`` as rows ``W (m, 27 n_T)`` on vertex values (exact: linear times
-    linear; sparse: boundary sub-triangles only), and the body-force work ``int F.r`` ``(m,)`` with
-    its absolute size ``(m,)``."""
-    ed, tri = space.edges, space.tri
-    b = ed["boundary"]
-    t, j = ed["owner"][b, 0], ed["owner"][b, 1]
-    n_out, _ = outward_normals(ed, space.X, space.mesh.points, b)
-    T = traction_rows(n_out)  # (nb, 2, 3)
-    r0, r1 = r[tri[t, j]], r[tri[t, (j + 1) % 3]]  # (nb, 2, m)
-    ell = ed["length"][b][:, None, None] / 6.0
-    c0 = ell * np.einsum("bki,bkm->bim", T, 2 * r0 + r1)
-    c1 = ell * np.einsum("bki,bkm->bim", T, r0 + 2 * r1)
-    base = 27 * t + 9 * j
-    cols = np.concatenate([(base[:, None] + 3 * a + np.arange(3)[None, :]).ravel() for a in (0, 1)])
-    vals = np.concatenate([cv.reshape(-1, r.shape[2]) for cv in (c0, c1)])  # (rows of cols, m)
-    m = r.shape[2]
-    W = sp.csr_matrix((vals.T.ravel(), (np.repeat(np.arange(m), len(cols)), np.tile(cols, m))),
-                      shape=(m, 27 * space.n_tri))  # duplicates (shared vertices) are summed
-    _, area = bary_gradients(space.X)
-    F = np.array([bd.body_force for bd in space.scene.bodies])[space.body]
-    rm = r[tri].mean(1)  # (n_T, 2, m): r at the centroid
-    terms = area[:, None] * np.einsum("tk,tkm->tm", F, rm)
-    return W, terms.sum(0), np.abs(terms).sum(0)
-
-
-def boundary_triangles(space: EquilibriumSpace) -> np.ndarray:
-    """The triangles with an edge on the boundary (the only ones :func:`work_rows` reads)."""
-    return np.unique(space.edges["owner"][space.edges["boundary"], 0])
-
-
-def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
-    """Check the data on the floating modes; return the fixed parameters with a rounding-level
-    imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
-    r = rigid_motions(space.mesh, joint=True)
-    if r.shape[2] == 0:
-        return space.z_fix, 0.0
-    W, bf, bf_abs = work_rows(space, r)
-    sigma0 = space.sigma0
-    work = W @ sigma0 + bf
-    imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
-    loaded = np.flatnonzero(space.z_fix != 0)
-    if len(loaded) == 0:
-        return space.z_fix, imbalance
-    G = (W @ space.vertex_map(boundary_triangles(space)))[:, loaded].toarray()
-    z_fix = space.z_fix.copy()
-    z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
-    return z_fix, imbalance
-
-
-def make_scales(space: EquilibriumSpace) -> Scales:
-    """``L`` the scene's length, ``E`` the stiffest body's uniaxial modulus, ``s`` the load per
-    unit length (tractions and body forces) or the stress of an interference fit."""
-    scene = space.scene
-    L = scene.length_scale
-    E = max(b.material.modulus for b in scene.bodies)
-    te = space.traction_edges
-    force = float(np.sum(space.edges["length"][te["ids"].astype(int)]
-                         * 0.5 * np.linalg.norm(te["c"], axis=2).sum(1))) if len(te["ids"]) else 0.0
-    _, area = bary_gradients(space.X)
-    F = np.array([b.body_force for b in scene.bodies])[space.body]
-    force += float(np.sum(area * np.linalg.norm(F, axis=1)))
-    s = max(force / L, E * max(0.0, -float(np.min(scene.gap_at(space.mesh.pair_x)))) / L)
-    return Scales(L, E, s if s > 0 else E * 1e-6)
-
-
-# -- exactness post-step -------------------------------------------------------------------
-
-def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, float]:
-    """Clip the contact parameters to ``sigma_nn <= 0`` and make each body's own rigid-motion
-    balance exact by the change ``dp = |p| * (a^T lam)`` (least change weighted by ``|p|``):
-    zero parameters stay zero and the others keep their sign (relative changes are at the
-    solver's tolerance). Returns the new ``y`` and the largest relative change."""
-    y = y.copy()
-    ci = space.contact_y.ravel()
-    p = np.minimum(y[ci], 0.0)
-    y[ci] = p
-    r = rigid_motions(space.mesh, joint=False)
-    if r.shape[2] == 0:
-        return y, 0.0
-    W, bf, _ = work_rows(space, r)
-    a = (W @ space.vertex_map(boundary_triangles(space)) @ space.Tm[:, ci]).toarray()
-    resid = W @ space.vertex_values(y).ravel() + bf  # should be zero: each body in balance
-    D = np.abs(p)
-    lam = np.linalg.lstsq((a * D) @ a.T, -resid, rcond=None)[0]
-    dp = D * (a.T @ lam)
-    rel = float(np.max(np.abs(dp) / np.where(D > 0, D, 1.0))) if len(dp) else 0.0
-    if rel >= 1.0:
-        raise SolverError(f"the solver's contact tractions are too far from balance to be corrected "
-                          f"(relative change {rel:.2g}); tighten the solver tolerances")
-    y[ci] = np.minimum(p + dp, 0.0)  # rel < 1 keeps every sign; the min only guards rounding
-    return y, rel
-
-
-def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30) -> tuple[np.ndarray, int]:
-    """Least-change correction of the non-contact parameters so that ``div sigma + F = 0``
-    holds to rounding, contact parameters held fixed: iterated Tikhonov
-    ``dy = B^T (B B^T + mu I)^-1 r`` (one sparse factorisation). ``B`` has dependent rows
-    (one per rigid motion of a body); they are consistent after :func:`balance_contact`, and
-    the ``mu`` term only moves the multipliers along them, which ``B^T`` annihilates."""
-    from ..linalg.factor import SPDFactor
-    ci = space.contact_y.ravel()
-    rest = np.setdiff1d(np.arange(space.n_y), ci)
-    B = (space.div @ space.stress_map).tocsc()
-    Br = B[:, rest].tocsr()
-    rhs = space.div_rhs - space.div @ space.sigma0 - B[:, ci] @ y[ci]
-    BB = (Br @ Br.T).tocsc()
-    # Each step shrinks a residual component of eigenvalue lam by mu / (lam + mu): mu must be far
-    # below the small eigenvalues of tiny elements (1e-10 left 1e-7 residuals on a mesh with a
-    # 0.02-wide column), and only large enough to factorise along the dependent rows.
-    mu = 1e-14 * float(BB.diagonal().max())
-    # SPD (mu > 0): a sparse Cholesky (cvxdual.linalg.factor), 10x SuperLU's LU at level 4
-    lu = SPDFactor((BB + mu * sp.identity(BB.shape[0], format="csr")).tocsr())
-    y = y.copy()
-    x = y[rest]
-    tol = 1e-15 * max(float(np.abs(rhs).max()), space.scales.stress)
-    done, last = 0, np.inf
-    while done < iters:
-        r = rhs - Br @ x
-        size = float(np.abs(r).max())
-        if size <= tol or size > 0.5 * last:  # at rounding, or stalled there
-            break
-        x = x + Br.T @ lu.solve(r)
-        done, last = done + 1, size
-    lu.close()
-    y[rest] = x
-    return y, done
-
-
-def make_exact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, dict]:
-    """The post-step: clip the contact tractions to ``sigma_nn <= 0``; unless equilibrium then
-    holds to rounding (``PROJECT_TOL``: the fast route's corrected fields do), balance the contact
-    tractions and project onto the equilibrium equations (a solver's field at its tolerance).
-    Everything else (traction continuity, boundary data, zero tangential contact traction,
-    action = reaction) holds by the parametrisation."""
-    ci = space.contact_y.ravel()
-    y1 = y.copy()
-    y1[ci] = np.minimum(y[ci], 0.0)
-    rel, iters = float(np.abs(y1 - y).max() / max(float(np.abs(y[ci]).max(initial=0.0)), 1e-300)), 0
-    if np.abs(space.divergence_residual(space.vertex_values(y1))).max() > PROJECT_TOL * space.scales.stress:
-        # a rebalance moves the contact tractions by rounding, which alone is ~1e-13 of the stress
-        # in the contact triangles: only where a projection follows
-        y1, rel = balance_contact(space, y)
-        y1, iters = project_equilibrium(space, y1)
-    change = float(np.abs(y1 - y).max() / space.scales.stress)
-    return y1, {"contact_change": rel, "projection_iterations": iters, "max_change": change}

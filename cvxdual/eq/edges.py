@@ -1,0 +1,49 @@
+"""The macro triangles' global edges: end nodes, the fixed frame of each edge (``n_g``), lookups
+by end nodes, and outward normals on the boundary (used by the equilibrium space and its bounds)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MeshError
+from .element import unit
+
+
+def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
+    """Global edges of the macro triangles: end nodes ``lo < hi``, unit normals ``ng`` (the
+    direction ``hi - lo`` turned clockwise), the edge of each local edge ``id (n_T, 3)`` (local
+    edge ``j`` runs ``X_j -> X_{j+1}``), whether it runs ``hi -> lo`` (``flip``) and the owner
+    ``(t, j)`` of every edge that has one triangle (the boundary)."""
+    a, b = tri, np.roll(tri, -1, axis=1)
+    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+    uniq, inv, count = np.unique(keys.ravel(), return_inverse=True, return_counts=True)
+    lo, hi = uniq // n_nodes, uniq % n_nodes
+    d = pts[hi] - pts[lo]
+    ng = unit(np.stack([d[:, 1], -d[:, 0]], 1))
+    bnd = np.flatnonzero(count == 1)
+    owner = np.full((len(uniq), 2), -1)
+    owner[inv, 0], owner[inv, 1] = np.repeat(np.arange(len(tri)), 3), np.tile(np.arange(3), len(tri))
+    return {"keys": uniq, "lo": lo, "hi": hi, "ng": ng, "id": inv.reshape(tri.shape), "flip": a > b,
+            "count": count, "boundary": bnd, "owner": owner, "length": np.linalg.norm(d, axis=1)}
+
+
+def edge_keys(a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
+    return np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+
+
+def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int, missing: bool = False) -> np.ndarray:
+    """The edges between nodes ``a`` and ``b``; with ``missing``, -1 where there is none."""
+    keys = edge_keys(a, b, n_nodes)
+    idx = np.minimum(np.searchsorted(edges["keys"], keys), len(edges["keys"]) - 1)
+    found = edges["keys"][idx] == keys
+    if not missing and not found.all():
+        raise MeshError("internal: a side edge is not an edge of the mesh")  # pragma: no cover
+    return np.where(found, idx, -1)
+
+
+def outward_normals(edges: dict, X: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals of boundary edges ``ids`` and ``s_o = n_g . n_out`` (+-1)."""
+    t = edges["owner"][ids, 0]
+    mid = 0.5 * (pts[edges["lo"][ids]] + pts[edges["hi"][ids]])
+    s_o = np.sign(np.einsum("ij,ij->i", mid - X[t].mean(1), edges["ng"][ids]))
+    return s_o[:, None] * edges["ng"][ids], s_o
