@@ -1,11 +1,10 @@
 """Balance and exactness of equilibrium fields: the rigid motions of the bodies, the work of
 loads and tractions on them, the balanced boundary data of a space, its scales, and the
 post-step that makes a solved field exactly admissible (contact tractions balanced, then the
-field projected onto the equilibrium equations where a solver left a residual)."""
+field projected onto the equilibrium equations where a solver left a residual). ``space`` is an
+:class:`~cvxdual.eq.space.EquilibriumSpace` (not imported: the space is built with these functions)."""
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -17,9 +16,6 @@ from ..geometry.rigid import candidates, check_balance
 from ..p0.assembly import Scales
 from .edges import outward_normals
 from .element import bary_gradients, traction_rows
-
-if TYPE_CHECKING:  # the space is built with these functions: a type only, no import cycle
-    from .space import EquilibriumSpace
 
 # equilibrium residual (relative to the stress scale) below which the field is left as solved: an
 # order under the certificate's "exact to rounding" (eq.bounds.ADMISSIBLE_TOL) and above the
@@ -67,7 +63,7 @@ def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
     return np.einsum("nij,jm->nim", R, coef)
 
 
-def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def work_rows(space, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For displacements ``r (n_nodes, 2, m)`` linear on each triangle: the boundary work
     ``int_bnd (sigma n).r ds`` as rows ``W (m, 27 n_T)`` on vertex values (exact: linear times
     linear; sparse: boundary sub-triangles only), and the body-force work ``int F.r`` ``(m,)`` with
@@ -94,12 +90,12 @@ def work_rows(space: EquilibriumSpace, r: np.ndarray) -> tuple[np.ndarray, np.nd
     return W, terms.sum(0), np.abs(terms).sum(0)
 
 
-def boundary_triangles(space: EquilibriumSpace) -> np.ndarray:
+def boundary_triangles(space) -> np.ndarray:
     """The triangles with an edge on the boundary (the only ones :func:`work_rows` reads)."""
     return np.unique(space.edges["owner"][space.edges["boundary"], 0])
 
 
-def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
+def balance_loads(space) -> tuple[np.ndarray, float]:
     """Check the data on the floating modes; return the fixed parameters with a rounding-level
     imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
     r = rigid_motions(space.mesh, joint=True)
@@ -118,7 +114,7 @@ def balance_loads(space: EquilibriumSpace) -> tuple[np.ndarray, float]:
     return z_fix, imbalance
 
 
-def make_scales(space: EquilibriumSpace) -> Scales:
+def make_scales(space) -> Scales:
     """``L`` the scene's length, ``E`` the stiffest body's uniaxial modulus, ``s`` the load per
     unit length (tractions and body forces) or the stress of an interference fit."""
     scene = space.scene
@@ -136,7 +132,7 @@ def make_scales(space: EquilibriumSpace) -> Scales:
 
 # -- exactness post-step -------------------------------------------------------------------
 
-def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, float]:
+def balance_contact(space, y: np.ndarray) -> tuple[np.ndarray, float]:
     """Clip the contact parameters to ``sigma_nn <= 0`` and make each body's own rigid-motion
     balance exact by the change ``dp = |p| * (a^T lam)`` (least change weighted by ``|p|``):
     zero parameters stay zero and the others keep their sign (relative changes are at the
@@ -162,7 +158,7 @@ def balance_contact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray,
     return y, rel
 
 
-def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30) -> tuple[np.ndarray, int]:
+def project_equilibrium(space, y: np.ndarray, iters: int = 30) -> tuple[np.ndarray, int]:
     """Least-change correction of the non-contact parameters so that ``div sigma + F = 0``
     holds to rounding, contact parameters held fixed: iterated Tikhonov
     ``dy = B^T (B B^T + mu I)^-1 r`` (one sparse factorisation). ``B`` has dependent rows
@@ -197,7 +193,7 @@ def project_equilibrium(space: EquilibriumSpace, y: np.ndarray, iters: int = 30)
     return y, done
 
 
-def make_exact(space: EquilibriumSpace, y: np.ndarray) -> tuple[np.ndarray, dict]:
+def make_exact(space, y: np.ndarray) -> tuple[np.ndarray, dict]:
     """The post-step: clip the contact tractions to ``sigma_nn <= 0``; unless equilibrium then
     holds to rounding (``PROJECT_TOL``: the fast route's corrected fields do), balance the contact
     tractions and project onto the equilibrium equations (a solver's field at its tolerance).
