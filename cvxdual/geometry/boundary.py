@@ -40,8 +40,16 @@ def supported(mesh: Mesh) -> np.ndarray:
             if part.kind == "clamped":
                 fixed[nodes] = True
             else:
-                fixed[nodes, 0 if part.on in ("left", "right") else 1] = True
+                fixed[nodes, sliding_component(bm.body, part)] = True
     return fixed
+
+
+def sliding_component(body, part) -> int:
+    """The displacement component a sliding support fixes: ``u_x`` (0) on a vertical side or line,
+    ``u_y`` (1) on a horizontal one (the body checks that an outline part is one of these)."""
+    if body.is_column:
+        return 0 if part.on in ("left", "right") else 1
+    return 0 if body.outline.part(part.on).segments[0].axis == "y" else 1
 
 
 def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
@@ -64,13 +72,18 @@ def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
     return np.where(fixed, -1, idx[master])
 
 
-def _outward_normal(side: str, position: str, d: np.ndarray) -> np.ndarray:
+def _outward_normal(body, side: str, d: np.ndarray) -> np.ndarray:
     """Unit outward normals of straight side edges with direction vectors ``d`` ``(m, 2)``
-    (edges run with increasing x on face/far, away from the face on left/right)."""
+    (edges run with increasing x on face/far, away from the face on left/right; along an outline
+    part in the outline's order: counter-clockwise round an upper body, clockwise round a lower
+    one, counter-clockwise round a hole)."""
     ell = np.linalg.norm(d, axis=1, keepdims=True)
     left_normal = np.stack([-d[:, 1], d[:, 0]], 1) / ell  # tangent rotated by +90 degrees
+    if not body.is_column and side != "face":
+        flip = body.position == "upper" and side not in {h.name for h in body.outline.holes}
+        return -left_normal if flip else left_normal
     flip = {"face": True, "far": False, "left": False, "right": True}[side]
-    if position != "upper":
+    if body.position != "upper":
         flip = not flip
     return -left_normal if flip else left_normal
 
@@ -103,7 +116,7 @@ def side_quadrature(mesh: Mesh, k: int, part, n_gauss: int = 8):
         return a, b, x, u, nds
     d = pb - pa
     x = pa[:, None, :] + u[None, :, None] * d[:, None, :]
-    n = _outward_normal(part.on, body.position, d) * np.linalg.norm(d, axis=1, keepdims=True)
+    n = _outward_normal(body, part.on, d) * np.linalg.norm(d, axis=1, keepdims=True)
     return a, b, x, u, n[:, None, :] * w[None, :, None]
 
 

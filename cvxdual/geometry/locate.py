@@ -17,8 +17,11 @@ from .pieces import Pieces, slab_bound
 
 
 def inside_body(mesh: Mesh, k: int, pts: np.ndarray, tol: float = 0.0) -> np.ndarray:
-    """Whether points lie in body ``k`` (between its face and far side, within its x range)."""
+    """Whether points lie in body ``k`` (between its face and far side, within its x range; an
+    outline body: in its mesh, the strip's curved pieces included)."""
     body = mesh.bodies[k].body
+    if not body.is_column:
+        return np.ones(len(pts), bool)  # decided by the location itself
     x, y = pts[:, 0], pts[:, 1]
     x0, x1 = body.x_range
     ok = (x >= x0 - tol) & (x <= x1 + tol)
@@ -48,24 +51,31 @@ def locate(mesh: Mesh, pieces: Pieces, pts: np.ndarray, body: np.ndarray | int, 
 
 def _locate_body(mesh: Mesh, pieces: Pieces, k: int, toff: int, p: np.ndarray) -> np.ndarray:
     bm = mesh.bodies[k]
-    c, eta, F, far = bm.columns, bm.eta, bm.face_y, bm.body.far
+    c, eta, F, inner = bm.columns, bm.eta, bm.face_y, bm.inner
     nc, nl = bm.shape
     x, y = p[:, 0], p[:, 1]
     i = np.clip(np.searchsorted(c, x, side="right") - 1, 0, nc - 2)
     t = (x - c[i]) / (c[i + 1] - c[i])
     Fc = (1 - t) * F[i] + t * F[i + 1]
-    e = (y - Fc) / (far - Fc)
+    e = (y - Fc) / ((1 - t) * inner[i] + t * inner[i + 1] - Fc)
     res = np.full(len(p), -1)
-    straight = e >= 0
+    if bm.rest is not None:  # beyond the strip (or beside it): gmsh's triangles
+        off = (x < c[0]) | (x > c[-1])
+        beyond = off | (e > 1)
+        found = bm.rest_finder(x[beyond], y[beyond])
+        ntri = len(bm.strip_triangles())
+        res[beyond] = np.where(found >= 0, pieces.tri_map[np.maximum(toff + ntri + found, 0)], -1)
+        e = np.where(off, np.nan, np.where(beyond, np.inf, e))
+    straight = (e >= 0) & np.isfinite(e)
     j = np.clip(np.searchsorted(eta, e, side="right") - 1, 0, nl - 2)
-    y_a = F[i] + (far - F[i]) * eta[j]  # vertex (i, j)
-    y_b = F[i + 1] + (far - F[i + 1]) * eta[j + 1]  # vertex (i+1, j+1)
+    y_a = F[i] + (inner[i] - F[i]) * eta[j]  # vertex (i, j)
+    y_b = F[i + 1] + (inner[i + 1] - F[i + 1]) * eta[j + 1]  # vertex (i+1, j+1)
     y_diag = (1 - t) * y_a + t * y_b
     in_t1 = bm.body.sign * (y_diag - y) >= 0  # t1 holds (i+1, j), on the face side of the diagonal
     nq = (nc - 1) * (nl - 1)
     tri = toff + np.where(in_t1, 0, nq) + i * (nl - 1) + j
     res[straight] = pieces.tri_map[tri[straight]]
-    below = np.flatnonzero(~straight)
+    below = np.flatnonzero(e < 0)
     if len(below):
         s = pieces.slabs
         mine = np.flatnonzero(s.body == k)

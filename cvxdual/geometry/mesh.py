@@ -17,14 +17,19 @@ counter-clockwise; node ``(i, j)`` (column ``i``, layer ``j``) of a body has ind
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..errors import MeshError
 from ..scene.scene import Body, Scene
 from ..validate import short
+from .outline_mesh import RestMesh, mesh_rest, strip_depth
 
+MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
+PROBE_COLUMNS = 64  # outline bodies are counted on a mesh of at most this many columns, scaled up (0.1 s)
 _MAP_SAMPLES = 8001  # resolution of the numerically inverted grading map (sizes vary smoothly)
 
 
@@ -92,9 +97,30 @@ def mesh_size(scene: Scene, level: int, extra=()) -> dict:
     for body in scene.bodies:
         inside = (brk[:-1] >= body.x_range[0]) & (brk[1:] <= body.x_range[1])
         cols, layers = float(counts[inside].sum()) * scale, float(body.layers) * scale
-        n_tri += 2.0 * cols * layers
-        n_nodes += (cols + 1.0) * (layers + 1.0)
+        if body.is_column:
+            n_tri += 2.0 * cols * layers
+            n_nodes += (cols + 1.0) * (layers + 1.0)
+            continue
+        if not cols <= MAX_COUNTED_COLUMNS:  # more columns than any mesh that fits: the strip alone says so
+            n_tri, n_nodes = n_tri + 2.0 * cols, n_nodes + 2.0 * (cols + 1.0)
+            continue
+        rest = _probe_rest(scene, body, level, cols, extra)
+        n_tri += 2.0 * cols + rest
+        n_nodes += 2.0 * (cols + 1.0) + 0.5 * rest  # a triangle mesh has about half as many nodes as triangles
     return {"triangles": n_tri, "nodes": n_nodes}
+
+
+def _probe_rest(scene: Scene, body: Body, level: int, cols: float, extra) -> float:
+    """gmsh's triangles beyond the strip of an outline body at ``level``, bounded from above
+    without meshing at that level: meshed at the highest level with at most
+    :data:`PROBE_COLUMNS` columns, times 4 per level above it (every size halves per level, so
+    the count grows by at most 4: 2.8-3.9 measured, docs/outlines.md)."""
+    probe = level - max(0, math.ceil(math.log2(max(cols, 1.0) / PROBE_COLUMNS)))
+    probe = max(probe, 0)
+    c = column_abscissae(scene, probe, extra)
+    c = c[(c >= body.x_range[0]) & (c <= body.x_range[1])]
+    n = len(mesh_rest(body, c, body.face.value(c) + body.sign * strip_depth(c), probe).triangles)
+    return n * 4.0 ** (level - probe)
 
 
 @dataclass(frozen=True)
@@ -102,13 +128,37 @@ class BodyMesh:
     """The column mesh of one body. ``columns`` are the x coordinates of its columns,
     ``eta`` the layer parameters (0 at the face, 1 at the far side) and ``face_y`` the height
     of the face node of each column (on the face, or on a tangent polygon, see
-    :mod:`~cvxdual.geometry.triangulation`)."""
+    :mod:`~cvxdual.geometry.triangulation`).
+
+    An outline body has one layer of columns (the strip) whose inner side is at ``inner_y``
+    instead of the far side, and gmsh's mesh of the rest (``rest``,
+    :mod:`~cvxdual.geometry.outline_mesh`); its nodes and triangles follow the strip's."""
 
     body: Body
     offset: int
     columns: np.ndarray
     eta: np.ndarray
     face_y: np.ndarray
+    inner_y: np.ndarray | None = None
+    rest: RestMesh | None = None
+
+    @property
+    def inner(self) -> np.ndarray:
+        """Height of the last layer's nodes at each column: the far side, or the strip's inner side."""
+        return np.full(len(self.columns), self.body.far) if self.inner_y is None else self.inner_y
+
+    @cached_property
+    def rest_finder(self):
+        """Point location in gmsh's triangles: ``finder(x, y)`` gives each point's triangle among
+        ``rest.triangles`` or -1 (matplotlib's trapezoid map; built once, on first use)."""
+        from matplotlib.tri import Triangulation
+
+        pts = self.points()
+        return Triangulation(pts[:, 0], pts[:, 1], self.rest.triangles).get_trifinder()
+
+    @property
+    def n_strip_nodes(self) -> int:
+        return len(self.columns) * len(self.eta)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -119,17 +169,23 @@ class BodyMesh:
 
     @property
     def n_nodes(self) -> int:
-        return len(self.columns) * len(self.eta)
+        return self.n_strip_nodes + (0 if self.rest is None else len(self.rest.points))
 
     def points(self) -> np.ndarray:
         f = self.face_y
-        y = f[:, None] + (self.body.far - f)[:, None] * self.eta[None, :]
+        y = f[:, None] + (self.inner - f)[:, None] * self.eta[None, :]
         x = np.broadcast_to(self.columns[:, None], y.shape)
-        return np.stack([x.ravel(), y.ravel()], axis=1)
+        strip = np.stack([x.ravel(), y.ravel()], axis=1)
+        return strip if self.rest is None else np.concatenate([strip, self.rest.points])
 
     def triangles(self) -> np.ndarray:
-        """Counter-clockwise triangles, two per quad; in layer 0 the first triangle of each quad
-        is ``(i,0), (i+1,0), (i+1,1)``: two face nodes and a vertical side."""
+        """Counter-clockwise triangles: the strip's first, two per quad (in layer 0 the first
+        triangle of each quad is ``(i,0), (i+1,0), (i+1,1)``: two face nodes and a vertical side),
+        then gmsh's."""
+        strip = self.strip_triangles()
+        return strip if self.rest is None else np.concatenate([strip, self.offset + self.rest.triangles])
+
+    def strip_triangles(self) -> np.ndarray:
         nc, nl = self.shape
         i, j = np.meshgrid(np.arange(nc - 1), np.arange(nl - 1), indexing="ij")
         i, j = i.ravel(), j.ravel()
@@ -141,10 +197,13 @@ class BodyMesh:
         return np.concatenate([t1, t2])
 
     def side_nodes(self, side: str) -> np.ndarray:
-        """Nodes along a side, in order of increasing x (face, far) or distance from the face (left, right)."""
+        """Nodes along a side, in order of increasing x (face, far) or distance from the face (left,
+        right); along an outline part, in the outline's order."""
         nc, nl = self.shape
         if side == "face":
             return self.node(np.arange(nc), 0)
+        if self.rest is not None:
+            return self.offset + self.rest.parts[side]
         if side == "far":
             return self.node(np.arange(nc), nl - 1)
         if side == "left":
@@ -194,6 +253,29 @@ class Mesh:
     def triangle_body(self) -> np.ndarray:
         return np.concatenate([np.full(len(bm.triangles()), k) for k, bm in enumerate(self.bodies)])
 
+    def continuation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where the bodies extend beyond the mesh (free arcs of outline bodies,
+        :func:`~cvxdual.geometry.outline_mesh.mesh_rest`): node triples ``(m, 3)`` whose P1
+        interpolant continues the displacement there, the area each covers ``(m,)`` and its
+        body ``(m,)``. Zero stress is admissible there; the displacement's energy is not zero."""
+        out = [(bm.offset + bm.rest.virtual_nodes, bm.rest.virtual_weight, np.full(len(bm.rest.virtual_weight), k))
+               for k, bm in enumerate(self.bodies) if bm.rest is not None]
+        if not out:
+            return np.zeros((0, 3), int), np.zeros(0), np.zeros(0, int)
+        return tuple(np.concatenate(v) for v in zip(*out, strict=True))
+
+    def polygonal_parts(self) -> list[str]:
+        """``body.part`` names of the curved outline parts meshed as polygons (supported or loaded
+        arcs: the mesh's domain is not the body's there)."""
+        out = []
+        for bm in self.bodies:
+            if bm.rest is None:
+                continue
+            held = {p.on for p in bm.body.boundary if p.kind != "traction" or p.traction.kind != "uniform"
+                    or any(p.traction.value)}
+            out += [f"{bm.body.name}.{p.name}" for p in bm.body.outline.parts if p.is_curved and p.name in held]
+        return out
+
 
 def column_abscissae(scene: Scene, level: int, extra=()) -> np.ndarray:
     """The global columns: graded over the union of the bodies' x ranges, with the break points
@@ -229,14 +311,19 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
         if len(c) < 2 or c[0] != x0 or c[-1] != x1:
             raise MeshError(f"internal: the columns of body {body.name!r} do not reach its ends "
                             f"[{x0:g}, {x1:g}]")  # pragma: no cover - the ends are always break points
-        xm = 0.5 * (x0 + x1) if scene.mesh.focus is None else 0.5 * sum(scene.mesh.focus)
-        H = float(body.height(np.clip(xm, x0, x1)))
-        depth = body.focus_depth
-        eta = graded_points(0.0, 1.0, body.layers, level,
-                            None if depth is None else (0.0, min(depth / H, 1.0)),
-                            scene.mesh.grading)
         fy = body.face.value(c) if face_y[k] is None else face_y[k](c)
-        bm = BodyMesh(body, offset, c, eta, fy)
+        if body.is_column:
+            xm = 0.5 * (x0 + x1) if scene.mesh.focus is None else 0.5 * sum(scene.mesh.focus)
+            H = float(body.height(np.clip(xm, x0, x1)))
+            depth = body.focus_depth
+            eta = graded_points(0.0, 1.0, body.layers, level,
+                                None if depth is None else (0.0, min(depth / H, 1.0)),
+                                scene.mesh.grading)
+            bm = BodyMesh(body, offset, c, eta, fy)
+        else:
+            inner = body.face.value(c) + body.sign * strip_depth(c)
+            rest = mesh_rest(body, c, inner, level)
+            bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest)
         bms.append(bm)
         pts.append(bm.points())
         offset += bm.n_nodes

@@ -204,23 +204,29 @@ def _in_window(tris: np.ndarray, window) -> np.ndarray:
     return (hx >= window[0]) & (lx <= window[1]) & (hy >= window[2]) & (ly <= window[3])
 
 
-def body_outline(body, n: int = 400) -> np.ndarray:
-    """Closed outline of a body on its true (curved) face."""
+def body_outline(body, n: int = 400) -> list[np.ndarray]:
+    """Closed outlines of a body on its true (curved) face and true arcs: the boundary, then
+    each hole of an outline body."""
     x0, x1 = body.x_range
     xs = np.linspace(x0, x1, n)
     face = np.stack([xs, body.face.value(xs)], 1)
-    far = np.array([[x1, body.far], [x0, body.far]])
-    return np.concatenate([face, far, face[:1]])
+    if body.is_column:
+        far = np.array([[x1, body.far], [x0, body.far]])
+        return [np.concatenate([face, far, face[:1]])]
+    path = [s.sample() for p in body.outline.path for s in p.segments]
+    holes = [np.concatenate([s.sample() for s in h.segments]) for h in body.outline.holes]
+    return [np.concatenate([face, *path]), *holes]
 
 
 def _outlines(ax, sol, **kw) -> None:
-    ax.add_collection(LineCollection([body_outline(bm.body) for bm in sol.mesh.bodies], **kw), autolim=False)
+    lines = [line for bm in sol.mesh.bodies for line in body_outline(bm.body)]
+    ax.add_collection(LineCollection(lines, **kw), autolim=False)
 
 
 def bodies_window(sol) -> tuple[float, float, float, float]:
     """``(x0, x1, y0, y1)``: both bodies with a 3% margin."""
-    (x0, x1), bodies = sol.scene.x_extent, sol.scene.bodies
-    y0, y1 = min(b.far for b in bodies), max(b.far for b in bodies)
+    pts = np.concatenate([line for b in sol.scene.bodies for line in body_outline(b, 3)])
+    (x0, y0), (x1, y1) = pts.min(0), pts.max(0)
     m = 0.03 * max(x1 - x0, y1 - y0)
     return x0 - m, x1 + m, y0 - m, y1 + m
 
@@ -365,7 +371,7 @@ def _mesh_lines(sol, window, flatten: bool) -> list[np.ndarray]:
     for bm in sol.mesh.bodies:
         nc, nl = bm.shape
         c = bm.columns
-        span = slice(bm.offset, bm.offset + bm.n_nodes)
+        span = slice(bm.offset, bm.offset + bm.n_strip_nodes)  # the columns (an outline body's strip)
         shift = _face_drawn(sol, bm.body, c, flatten) - bm.face_y
         y = pts[span, 1].reshape(nc, nl) + shift[:, None] + u[span, 1].reshape(nc, nl)
         i = np.flatnonzero((c >= x0) & (c <= x1))

@@ -3,7 +3,9 @@
 A body is the region between its contact *face* ``y = f(x)`` (a :mod:`~cvxdual.scene.profiles`
 curve) and a straight *far* side ``y = far``, for ``x`` in ``[x0, x1]``: the upper body
 (the paper's ``Omega'``) lies above its face, the lower body (``Omega''``) below. Its four
-sides are named ``face``, ``far``, ``left`` (``x = x0``) and ``right`` (``x = x1``).
+sides are named ``face``, ``far``, ``left`` (``x = x0``) and ``right`` (``x = x1``). A body
+with an *outline* (:mod:`~cvxdual.scene.outline`) keeps its face and replaces the other three
+sides by named parts of any shape, holes included; its ``far`` is the outline's extreme height.
 
 Boundary parts (a scene declares only those it has; undeclared boundary is traction free):
 
@@ -32,6 +34,7 @@ import numpy as np
 from ..errors import SceneError
 from ..validate import integer, number, pair, short, text
 from .materials import Material
+from .outline import Outline, check_outline
 from .profiles import Flat, Profile
 
 SIDES = ("face", "far", "left", "right")
@@ -65,8 +68,9 @@ class BoundaryPart:
     name: str = ""
 
     def __post_init__(self):
-        if self.on not in SIDES:
-            raise SceneError(f"boundary part {short(self.name)}: 'on' must be one of {SIDES}, got {short(self.on)}")
+        if not isinstance(self.on, str) or not self.on:
+            raise SceneError(f"boundary part {short(self.name)}: 'on' must name a side {SIDES} or an outline part, "
+                             f"got {short(self.on)}")
         if self.kind not in PART_KINDS:
             raise SceneError(f"boundary part {short(self.name)}: kind must be one of {PART_KINDS}, "
                              f"got {short(self.kind)}")
@@ -89,13 +93,14 @@ class Body:
     name: str
     position: str
     x_range: tuple[float, float]
-    far: float
+    far: float | None  # None only for an outline body: then the outline's extreme height
     face: Profile
     material: Material
     boundary: tuple[BoundaryPart, ...] = ()
     body_force: tuple[float, float] = (0.0, 0.0)
     layers: int = 4
     focus_depth: float | None = None
+    outline: Outline | None = None
 
     def __post_init__(self):
         if self.position not in POSITIONS:
@@ -106,6 +111,8 @@ class Body:
             raise SceneError(f"body {short(self.name)}: x range must have x0 < x1, got {short(self.x_range)}")
         object.__setattr__(self, "x_range", (x0, x1))
         object.__setattr__(self, "body_force", pair(self.body_force, f"body {short(self.name)} body_force"))
+        if self.outline is not None:
+            self._check_outline(x0, x1)
         far = number(self.far, f"body {short(self.name)}: far")
         object.__setattr__(self, "far", far)
         integer(self.layers, f"body {short(self.name)}: layers", minimum=1)
@@ -137,11 +144,48 @@ class Body:
                 and not number(self.focus_depth, f"body {short(self.name)}: focus_depth", "positive") > 0):
             raise SceneError(f"body {short(self.name)}: focus_depth must be positive, got {short(self.focus_depth)}")
         for part in self.boundary:
-            if part.interval is not None:
+            if self.outline is not None and part.on != "face":
+                self._check_outline_part(part)
+            elif part.on not in SIDES:
+                raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} is on {short(part.on)}, "
+                                 f"which is not a side; a column body has the sides {', '.join(SIDES)}")
+            elif part.interval is not None:
                 self._check_interval(part, x0, x1, far)
             if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
                 raise SceneError(f"body {short(self.name)}: a {part.kind} support on a curved face is not "
                                  "axis-aligned; put supports on flat sides")
+
+    def _check_outline(self, x0: float, x1: float) -> None:
+        """An outline body: the outline closes on the face; ``far`` is the outline's extreme height."""
+        if not isinstance(self.outline, Outline):
+            raise SceneError(f"body {short(self.name)}: outline must be a cvxdual.scene.outline.Outline")
+        check_outline(self.outline, self.face, (x0, x1), self.position, self.name)
+        y = self.outline.points()[:, 1]
+        far = float(y.max() if self.position == "upper" else y.min())
+        if self.far is not None and abs(number(self.far, f"body {short(self.name)}: far") - far) > 1e-9 * np.ptp(y):
+            raise SceneError(f"body {short(self.name)}: far = {self.far:g} but its outline reaches y = {far:g}; "
+                             "drop far (an outline body's far side is its outline's extreme) or make them agree")
+        object.__setattr__(self, "far", far)
+
+    def _check_outline_part(self, part: BoundaryPart) -> None:
+        if part.on in SIDES[1:] and part.on not in self.outline.names:
+            raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} is on {part.on!r}, but the body "
+                             f"has an outline: name one of its parts ({', '.join(self.outline.names)})")
+        if part.on not in self.outline.names:
+            raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} is on {short(part.on)}, which is "
+                             f"not a part of its outline ({', '.join(self.outline.names)}); name one of them")
+        if part.interval is not None:
+            raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} has an interval on the outline "
+                             f"part {part.on!r}; split the part in the outline instead")
+        seg = self.outline.part(part.on).segments
+        if part.kind == "sliding" and (len(seg) > 1 or seg[0].axis is None):
+            raise SceneError(f"body {short(self.name)}: sliding support {part.name!r} is on {part.on!r}, which is not "
+                             "a horizontal or vertical line; slide on an axis-aligned line or clamp it")
+
+    @property
+    def is_column(self) -> bool:
+        """True for a column body (face, far side, vertical sides), False for an outline body."""
+        return self.outline is None
 
     def _check_interval(self, part: BoundaryPart, x0: float, x1: float, far: float) -> None:
         """A part's interval must lie on its side: an x interval within the body's x range on
@@ -391,7 +435,7 @@ def problem_entries(scene: Scene) -> tuple[tuple[str, object], ...]:
     for b in scene.bodies:
         w = f"bodies.{b.name}"
         items += [(f"{w}.position", b.position), (f"{w}.x", b.x_range), (f"{w}.far", b.far), (f"{w}.face", b.face),
-                  (f"{w}.material", b.material.C), (f"{w}.body_force", b.body_force)]
+                  (f"{w}.material", b.material.C), (f"{w}.body_force", b.body_force), (f"{w}.outline", b.outline)]
         items += [(f"{w}.boundary.{p.name or i}", (p.on, p.kind, p.traction, p.interval))
                   for i, p in enumerate(b.boundary)]
     items += [("contact.interval", scene.contact), ("contact.gap", scene.gap), ("contact.friction", scene.friction)]
@@ -449,7 +493,8 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
     bodies = tuple(replace(b, x_range=ival(b.x_range), far=b.far * length, face=prof(b.face),
                            material=mat(b.material), boundary=tuple(part(p) for p in b.boundary),
                            body_force=(b.body_force[0] * stress / length, b.body_force[1] * stress / length),
-                           focus_depth=None if b.focus_depth is None else b.focus_depth * length)
+                           focus_depth=None if b.focus_depth is None else b.focus_depth * length,
+                           outline=None if b.outline is None else b.outline.scaled(length))
                    for b in scene.bodies)
     ex = scene.exact
     if ex is not None:

@@ -18,13 +18,15 @@ from importlib import resources
 from pathlib import Path
 
 from ..errors import SceneError
-from ..validate import integer, number, short, table, text
+from ..validate import integer, number, pair, short, table, text
 from .materials import Material
+from .outline import outline_from_dict
 from .profiles import profile_from_dict
 from .scene import WHY, Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction, problem_entries
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
-BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth"}
+BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth", "outline",
+             "holes"}
 PART_KEYS = {"on", "kind", "traction", "interval"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
 CONTACT_KEYS = {"interval", "gap", "friction"}
@@ -341,9 +343,16 @@ def _body(name: str, d: dict, plane: str) -> Body:
         parts.append(BoundaryPart(on=_need(pd, "on", pw), kind=_need(pd, "kind", pw), traction=tr,
                                   interval=pd.get("interval"), name=pname))
     focus_depth = d.get("focus_depth")
+    face = profile_from_dict(_need(d, "face", where), f"{where}.face")
+    outline = None
+    if "outline" in d:
+        x1 = pair(_need(d, "x", where), f"{where}.x")[1]
+        outline = outline_from_dict(d["outline"], d.get("holes"), (x1, float(face.value(x1))), where)
+    elif "holes" in d:
+        raise SceneError(f"{where}: holes need an outline; give the body's outline too")
     return Body(name=name, position=_need(d, "position", where), x_range=_need(d, "x", where),
-                far=number(_need(d, "far", where), f"{where}.far"),
-                face=profile_from_dict(_need(d, "face", where), f"{where}.face"),
+                far=number(d["far"], f"{where}.far") if "far" in d or outline is None else None,
+                face=face, outline=outline,
                 material=material, boundary=tuple(parts), body_force=d.get("body_force", (0.0, 0.0)),
                 layers=integer(d.get("layers", 4), f"{where}.layers"),
                 focus_depth=None if focus_depth is None else number(focus_depth, f"{where}.focus_depth", "positive"))

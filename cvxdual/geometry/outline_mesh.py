@@ -1,0 +1,356 @@
+"""Meshes of outline bodies: the paper's strip of columns along the face, gmsh beyond it.
+
+Along the face of an outline body (:mod:`cvxdual.scene.outline`) the mesh is one layer of the
+column mesh (:mod:`cvxdual.geometry.mesh`): face nodes on the global columns, so both bodies'
+contact nodes pair on vertical lines and the curved pieces of both triangulations are built as
+for column bodies. The layer's inner side is a chain of nodes at depth ``t_i`` (the local column
+spacing) below (or above) the face. The rest of the body, between that chain and the outline, is
+meshed by gmsh (its Python API) conforming to the chain: one geometry point per chain node and
+two-node transfinite lines between them, so gmsh adds no node on the chain and keeps the given
+coordinates bit for bit.
+
+Sizes: the chain's spacing near the face, growing by :data:`GROWTH` times the distance from the
+chain up to twice the coarsest column spacing; arcs get at least ``4 * 2**level`` edges a quarter
+turn. Every size follows the columns, which halve per level, so ``--level`` halves the mesh.
+gmsh runs on one thread with a fixed algorithm: the same input gives the same mesh.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import MeshError
+from ..scene.outline import Segment
+
+GROWTH = 0.4  # element size grows by 0.4 times the distance from the strip (a mild grading)
+STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells
+ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level)
+_LOCK = threading.Lock()  # gmsh keeps one global model per process
+
+# the system libraries gmsh's wheel links, and the Debian/Ubuntu packages that provide them
+SYSTEM_PACKAGES = {"libGLU": "libglu1-mesa", "libXcursor": "libxcursor1", "libXft": "libxft2",
+                   "libXinerama": "libxinerama1", "libX11": "libx11-6", "libXrender": "libxrender1",
+                   "libfontconfig": "libfontconfig1", "libXext": "libxext6", "libXfixes": "libxfixes3",
+                   "libgomp": "libgomp1"}
+
+
+def import_gmsh():
+    """The gmsh module, or a :class:`MeshError` naming what is missing and how to get it."""
+    try:
+        import gmsh
+    except (ImportError, OSError) as e:  # a missing system library raises OSError from the wheel's loader
+        msg = str(e)
+        for lib, pkg in SYSTEM_PACKAGES.items():
+            if lib in msg:
+                raise MeshError(f"outline bodies need gmsh, which cannot load the system library {lib} "
+                                f"({msg.split(':')[0]}); install it (Debian/Ubuntu: apt-get install {pkg}) "
+                                "or use column bodies") from None
+        raise MeshError(f"outline bodies need gmsh, which cannot be imported ({msg}); pip install gmsh, or use "
+                        "column bodies") from None
+    return gmsh
+
+
+@dataclass(frozen=True)
+class RestMesh:
+    """The gmsh part of an outline body's mesh, in the body's local node numbering (strip node
+    ``(i, j)`` is ``2 i + j``, gmsh's own nodes follow from ``2 n_columns``): ``points`` the new
+    nodes, ``triangles`` counter-clockwise, ``parts`` every outline part's nodes in path order."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    parts: dict
+    virtual_nodes: np.ndarray  # (m, 3): the P1 function continued beyond a free arc (:func:`_free_arc`)
+    virtual_weight: np.ndarray  # (m,): the area it covers
+
+
+def strip_depth(columns: np.ndarray) -> np.ndarray:
+    """Depth of the strip at each column: the mean of the adjacent column spacings."""
+    w = np.diff(columns)
+    return STRIP_ASPECT * np.concatenate([[w[0]], 0.5 * (w[:-1] + w[1:]), [w[-1]]])
+
+
+NEAREST = 16  # sources compared at each point of the size field
+
+
+@dataclass(frozen=True)
+class SizeField:
+    """The element size asked at the outline's points (gmsh interpolates the boundary's sizes
+    inside). Sources: the strip's inner chain (each node's column spacing) and every arc's
+    vertices (``ARC_EDGES * 2**level`` edges a quarter turn); the size at a point is the smallest
+    of ``s + GROWTH * max(0, d - s)`` over the nearby sources, at most ``cap`` (twice the coarsest
+    column spacing)."""
+
+    points: np.ndarray
+    sizes: np.ndarray
+    cap: float
+
+    @classmethod
+    def of(cls, body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> SizeField:
+        w = strip_depth(columns) / STRIP_ASPECT
+        src, size = [np.stack([columns, inner_y], 1)], [w]
+        for p in body.outline.parts:
+            for seg in p.segments:
+                if seg.is_arc:  # a source at every vertex of the arc's polygon
+                    q = seg.sample(max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES * 2**level)))
+                    src.append(q)
+                    size.append(np.full(len(q), arc_size(seg, level)))
+        return cls(np.concatenate(src), np.concatenate(size), 2.0 * float(np.diff(columns).max()))
+
+    def at(self, pts: np.ndarray) -> np.ndarray:
+        from scipy.spatial import cKDTree
+
+        k = min(NEAREST, len(self.points))
+        d, i = cKDTree(self.points).query(pts, k=k)
+        d, i = d.reshape(len(pts), k), i.reshape(len(pts), k)
+        s = self.sizes[i]
+        return np.minimum(self.cap, np.min(s + GROWTH * np.maximum(d - s, 0.0), axis=1))
+
+
+def arc_size(seg, level: int) -> float:
+    """Edge length on an arc: ``ARC_EDGES * 2**level`` edges a quarter turn."""
+    return math.dist(seg.start, seg.center) * (math.pi / 2) / (ARC_EDGES * 2**level)
+
+
+def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
+    """Mesh the body between the strip's inner chain ``(columns, inner_y)`` and its outline."""
+    gmsh = import_gmsh()
+    with _LOCK:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            return _mesh(gmsh, body, columns, inner_y, level)
+        except MeshError:
+            raise
+        except Exception as e:  # gmsh reports its failures as plain exceptions
+            raise MeshError(f"gmsh could not mesh body {body.name!r} at level {level} ({e}); check its outline "
+                            "(parts very close to the face, or to each other) or change the level") from None
+        finally:
+            gmsh.finalize()
+
+
+def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
+    geo = gmsh.model.geo
+    gmsh.model.add(body.name)
+    nc = len(columns)
+    face_y = body.face.value(columns)
+    chain = np.stack([columns, inner_y], 1)
+    w = strip_depth(columns) / STRIP_ASPECT
+    field = SizeField.of(body, columns, inner_y, level)
+    cap = field.cap
+
+    def size(p) -> float:
+        return float(field.at(np.array([p], float))[0])
+
+    points: dict[tuple, int] = {}  # geometry points by coordinates: shared ends are one point
+    sizes: dict[int, float] = {}  # the smallest size any curve asks of a point
+
+    def point(p, lc=None) -> int:
+        key = (float(p[0]), float(p[1]))
+        lc = size(key) if lc is None else lc
+        if key not in points:
+            points[key] = geo.addPoint(key[0], key[1], 0.0, lc)
+        tag = points[key]
+        sizes[tag] = min(lc, sizes.get(tag, math.inf))
+        return tag
+
+    fixed = []  # the strip's edges: two nodes each
+
+    def line(a, b, keep=False) -> int:
+        c = geo.addLine(a, b)
+        if keep:
+            fixed.append(c)
+        return c
+
+    chain_pts = [point(chain[i], w[i]) for i in range(nc)]
+    ends = {"right": (body.x_range[1], float(face_y[-1])), "left": (body.x_range[0], float(face_y[0]))}
+    loop: list[int] = []  # signed curve tags of the outer loop, from the right end of the chain
+    part_curves: dict[str, list[int]] = {}
+    path = [(p.name, s) for p in body.outline.path for s in p.segments]
+    # the path's ends are the face's ends exactly (the outline check allows rounding)
+    path[0] = (path[0][0], Segment(ends["right"], path[0][1].end, path[0][1].center))
+    path[-1] = (path[-1][0], Segment(path[-1][1].start, ends["left"], path[-1][1].center))
+    first_name, first = path[0]
+    last_name, last = path[-1]
+    start_pt = chain_pts[-1]
+    if _continues_side(first, ends["right"], chain[-1], body.sign):
+        path[0] = (first_name, Segment(tuple(chain[-1]), first.end, first.center))
+        part_curves[first_name] = [("strip", nc - 1)]
+    else:
+        loop.append(line(start_pt, point(ends["right"], w[-1]), keep=True))
+    trim_last = _continues_side(last, ends["left"], chain[0], body.sign, at_end=True)
+    if trim_last:
+        path[-1] = (last_name, Segment(last.start, tuple(chain[0]), last.center))
+    loaded = {bp.on for bp in body.boundary if bp.kind != "traction" or any(bp.traction.value)
+              or bp.traction.kind != "uniform"}
+    virtual: list[tuple] = []  # (kind, node geometry points, weight) of each free arc's pieces
+
+    def curve(name, s, concave) -> list[int]:
+        if not s.is_arc:
+            return [line(point(s.start), point(s.end))]
+        if name in loaded:  # a supported or loaded arc: gmsh's polygon of it (not certified)
+            return [_arc(geo, point, s, level, size)]
+        return _free_arc(s, concave, level, point, line, virtual)
+
+    ccw = body.position == "upper"  # the path runs counter-clockwise round an upper body
+    for name, s in path:
+        cs = curve(name, s, s.is_arc and (s.angles()[1] > 0) != ccw)
+        loop += cs
+        part_curves.setdefault(name, []).extend(cs)
+    if trim_last:
+        part_curves[last_name].append(("strip", 0))
+    else:
+        loop.append(line(point(ends["left"], w[0]), chain_pts[0], keep=True))
+    for i in range(nc - 1):
+        loop.append(line(chain_pts[i], chain_pts[i + 1], keep=True))
+    loops = [geo.addCurveLoop(loop)]
+    for h in body.outline.holes:
+        cs = [c for s in h.segments for c in curve(h.name, s, True)]  # the body lies outside its holes
+        part_curves[h.name] = cs
+        loops.append(geo.addCurveLoop(cs))
+    geo.addPlaneSurface(loops)
+    for tag, lc in sizes.items():
+        geo.mesh.setSize([(0, tag)], lc)
+    geo.synchronize()
+    for c in fixed:
+        gmsh.model.mesh.setTransfiniteCurve(c, 2)
+    for name, value in (("Mesh.Algorithm", 6), ("Mesh.MeshSizeExtendFromBoundary", 1),
+                        ("Mesh.MeshSizeFromPoints", 1), ("Mesh.MeshSizeFromCurvature", 0),
+                        ("Mesh.MeshSizeMax", cap), ("General.NumThreads", 1), ("Mesh.MaxRetries", 3)):
+        gmsh.option.setNumber(name, value)
+    gmsh.model.mesh.generate(2)
+    tags, xyz, _ = gmsh.model.mesh.getNodes()
+    xy = xyz.reshape(-1, 3)[:, :2]
+    # gmsh's nodes on the chain are the strip's inner nodes (i, 1); at the face ends also (i, 0)
+    known = np.concatenate([chain, [[columns[0], face_y[0]], [columns[-1], face_y[-1]]]])
+    known_idx = np.concatenate([2 * np.arange(nc) + 1, [0, 2 * nc - 2]])
+    hit = _match_rows(xy, known)
+    idx = np.where(hit >= 0, known_idx[np.maximum(hit, 0)], -1)
+    new = idx < 0
+    idx[new] = 2 * nc + np.arange(int(new.sum()))
+    order = np.argsort(tags)
+    lookup = np.full(int(tags.max()) + 1, -1)
+    lookup[tags[order]] = idx[order]
+    _, tri_nodes = gmsh.model.mesh.getElementsByType(2)
+    tris = lookup[np.asarray(tri_nodes, np.int64).reshape(-1, 3)]
+    allp = np.concatenate([np.zeros((2 * nc, 2)), xy[new]])
+    allp[idx[~new]] = xy[~new]
+    d1, d2 = allp[tris[:, 1]] - allp[tris[:, 0]], allp[tris[:, 2]] - allp[tris[:, 0]]
+    cw = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] < 0
+    tris[cw] = tris[cw][:, ::-1]  # counter-clockwise, as every triangle of the package
+    pts = xy[new]
+    parts = {}
+    for name, curves in part_curves.items():
+        chainp = []
+        for c in curves:
+            if isinstance(c, tuple):  # the strip's side: face node then inner node at that column
+                i = c[1]
+                seg = [2 * i, 2 * i + 1] if i == nc - 1 else [2 * i + 1, 2 * i]
+            else:
+                _, en = gmsh.model.mesh.getElementsByType(1, c)
+                e = lookup[np.asarray(en, np.int64).reshape(-1, 2)]
+                seg = _ordered(e, c)
+            chainp = seg if not chainp else chainp + seg[1:]
+        parts[name] = np.asarray(chainp)
+    if np.any(tris < 0) or not len(tris):
+        raise MeshError(f"gmsh gave no usable mesh of body {body.name!r}")  # pragma: no cover - gmsh contract
+    vn, vw = _virtual(gmsh, virtual, lookup, tris, allp)
+    return RestMesh(points=pts, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
+
+
+def _virtual(gmsh, virtual, lookup, tris, allp) -> tuple[np.ndarray, np.ndarray]:
+    """Node triples and area weights of the free arcs' continuation pieces (:func:`_free_arc`)."""
+    if not virtual:
+        return np.zeros((0, 3), int), np.zeros(0)
+
+    def node(ptag) -> int:
+        return int(lookup[int(gmsh.model.mesh.getNodes(0, ptag)[0][0])])
+
+    n = int(tris.max()) + 1
+    e = np.stack([tris, np.roll(tris, -1, axis=1)], -1).reshape(-1, 2)
+    keys = np.sort(e, axis=1) @ np.array([n, 1])
+    order = np.argsort(keys)
+    nodes, weight = [], []
+    for kind, pts, w in virtual:
+        if kind == "corner":
+            tri = [node(p) for p in pts]
+            p = allp[tri]
+            d1, d2 = p[1] - p[0], p[2] - p[0]
+            nodes.append(tri)
+            weight.append(0.5 * abs(d1[0] * d2[1] - d1[1] * d2[0]))
+        else:
+            a, b = sorted(node(p) for p in pts)
+            t = order[np.searchsorted(keys[order], a * n + b)] // 3
+            nodes.append([int(v) for v in tris[t]])
+            weight.append(w)
+    return np.asarray(nodes, int), np.asarray(weight, float)
+
+
+def _match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """For each row of ``a`` ``(m, 2)``, the index of the bit-identical row of ``b``, or -1."""
+    view = np.dtype([("x", float), ("y", float)])
+    av, bv = np.ascontiguousarray(a).view(view).ravel(), np.ascontiguousarray(b).view(view).ravel()
+    order = np.argsort(bv)
+    pos = np.clip(np.searchsorted(bv[order], av), 0, len(bv) - 1)
+    return np.where(bv[order][pos] == av, order[pos], -1)
+
+
+def _ordered(e: np.ndarray, curve: int) -> list:
+    """Node chain of a meshed curve from its line elements ``(m, 2)`` (gmsh gives them in order)."""
+    if len(e) > 1 and e[0, 1] != e[1, 0]:
+        raise MeshError(f"internal: gmsh's edges of curve {curve} are not in order")  # pragma: no cover
+    return [int(e[0, 0]), *map(int, e[:, 1])]
+
+
+def _free_arc(s, concave, level, point, line, virtual) -> list[int]:
+    """A traction-free arc as a polygon inside the body (section 9 of docs/theory.md): chords of
+    a convex arc, or, round a concave one (a hole), the tangents at the chords' ends. The pieces of
+    the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
+    displacement continues there as a P1 function, recorded in ``virtual`` for the energy bound:
+    the adjacent triangle's polynomial on a segment (kind ``"segment"``: the chord's ends and the
+    segment's area), or the interpolant on the triangle of a corner (kind ``"corner"``)."""
+    a0, sweep = s.angles()
+    r = math.dist(s.start, s.center)
+    n = max(1, math.ceil(abs(sweep) / (math.pi / 2) * ARC_EDGES * 2**level - 1e-9))
+    d = sweep / n
+    t = a0 + d * np.arange(n + 1)
+    c = np.array(s.center)
+    on = [tuple(c + r * np.array([math.cos(q), math.sin(q)])) for q in t]
+    on[0], on[-1] = s.start, s.end  # the ends exactly as given: shared with the neighbours
+    lc = r * abs(d)
+    ids = [point(q, lc) for q in on]
+    curves = []
+    if not concave:
+        seg_area = 0.5 * r * r * (abs(d) - math.sin(abs(d)))
+        for j in range(n):
+            curves.append(line(ids[j], ids[j + 1], keep=True))
+            virtual.append(("segment", (ids[j], ids[j + 1]), seg_area))
+        return curves
+    rv = r / math.cos(0.5 * d)
+    for j in range(n):
+        q = t[j] + 0.5 * d
+        v = point(tuple(c + rv * np.array([math.cos(q), math.sin(q)])), lc)
+        curves += [line(ids[j], v, keep=True), line(v, ids[j + 1], keep=True)]
+        virtual.append(("corner", (ids[j], v, ids[j + 1]), None))
+    return curves
+
+
+def _arc(geo, point, s, level, size) -> int:
+    lc = arc_size(s, level)
+    a = point(s.start, min(size(s.start), lc))
+    b = point(s.end, min(size(s.end), lc))
+    c = point(s.center, lc)
+    return geo.addCircleArc(a, c, b)
+
+
+def _continues_side(seg, end, inner, sign, at_end=False) -> bool:
+    """Whether the outline's segment at a face end runs along the strip's side: a vertical line
+    leaving the face end away from the face, longer than the strip is deep."""
+    if seg.is_arc or seg.axis != "y":
+        return False
+    far = seg.start if at_end else seg.end
+    depth = abs(inner[1] - end[1])
+    return sign * (far[1] - end[1]) > depth * (1 + 1e-9)

@@ -1,0 +1,307 @@
+"""Body outlines: the boundary of a general plane body, in named parts (docs/scenes.md#outlines).
+
+A column body is bounded by its face, a straight far side and two vertical sides. A body with an
+*outline* keeps its contact face ``y = f(x)`` over its ``x`` range (a profile, as before), and the
+rest of its boundary is a *path* of named parts from the face's right end back to its left end,
+plus optional *holes*. A part is a line segment or a circular arc (less than a half turn, given
+by its end and centre); a circular hole is one part of four quarter arcs. Supports and loads name
+the parts (``on = "bottom"``).
+
+The paper only asks the contact arcs to be graphs with paired face nodes (its ``Omega'``,
+``Omega''`` are any plane regions): the mesh keeps a strip of columns along the face and meshes
+the rest with gmsh (:mod:`cvxdual.geometry.outline_mesh`).
+
+Validation here is geometric and complete before any meshing: the path must close on the face,
+no two segments (face included) may cross or touch except at shared ends, holes must lie inside,
+names must be unique.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError
+from ..validate import number, pair, short, text
+
+ARC_SAMPLES = 64  # points per arc when checking crossings and drawing (a chord error of 1e-4 of the radius)
+FACE_SAMPLES = 2001  # points of the face in the crossing checks
+PART_KINDS = ("line", "arc")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A line from ``start`` to ``end``, or a circular arc from ``start`` to ``end`` about
+    ``center`` (the shorter way round: less than a half turn)."""
+
+    start: tuple[float, float]
+    end: tuple[float, float]
+    center: tuple[float, float] | None = None
+
+    @property
+    def is_arc(self) -> bool:
+        return self.center is not None
+
+    def sample(self, n: int = ARC_SAMPLES) -> np.ndarray:
+        """``(n + 1, 2)`` points from start to end (``2`` points for a line)."""
+        p0, p1 = np.array(self.start), np.array(self.end)
+        if not self.is_arc:
+            return np.stack([p0, p1])
+        c = np.array(self.center)
+        a0, sweep = self.angles()
+        t = a0 + sweep * np.linspace(0.0, 1.0, n + 1)
+        r = float(np.linalg.norm(p0 - c))
+        pts = c + r * np.stack([np.cos(t), np.sin(t)], 1)
+        pts[0], pts[-1] = p0, p1  # the ends exactly as given: they are shared with the neighbours
+        return pts
+
+    def angles(self) -> tuple[float, float]:
+        """Start angle and signed sweep of an arc (``|sweep| < pi``)."""
+        c = np.array(self.center)
+        d0, d1 = np.array(self.start) - c, np.array(self.end) - c
+        a0 = math.atan2(d0[1], d0[0])
+        sweep = math.atan2(d0[0] * d1[1] - d0[1] * d1[0], float(d0 @ d1))
+        return a0, sweep
+
+    @property
+    def length(self) -> float:
+        p0, p1 = np.array(self.start), np.array(self.end)
+        if not self.is_arc:
+            return float(np.linalg.norm(p1 - p0))
+        return abs(self.angles()[1]) * float(np.linalg.norm(p0 - np.array(self.center)))
+
+    @property
+    def axis(self) -> str | None:
+        """``"x"`` for a horizontal line, ``"y"`` for a vertical one, else ``None``."""
+        if self.is_arc:
+            return None
+        dx, dy = abs(self.end[0] - self.start[0]), abs(self.end[1] - self.start[1])
+        tol = 1e-12 * (dx + dy)  # a line typed axis-aligned: its two coordinates agree to rounding
+        return "x" if dy <= tol else "y" if dx <= tol else None
+
+
+@dataclass(frozen=True)
+class Part:
+    """A named stretch of boundary: one segment, or the four quarter arcs of a circular hole."""
+
+    name: str
+    segments: tuple[Segment, ...]
+
+    @property
+    def is_curved(self) -> bool:
+        return any(s.is_arc for s in self.segments)
+
+
+@dataclass(frozen=True)
+class Outline:
+    """The boundary of a body beyond its face: ``path`` from the face's right end to its left
+    end, and ``holes`` (closed parts). Built by :func:`outline_from_dict` or directly; checked
+    against the face by :func:`check_outline` (the body does it)."""
+
+    path: tuple[Part, ...]
+    holes: tuple[Part, ...] = ()
+
+    @property
+    def parts(self) -> tuple[Part, ...]:
+        return self.path + self.holes
+
+    def part(self, name: str) -> Part:
+        for p in self.parts:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parts)
+
+    def points(self) -> np.ndarray:
+        """Every sampled point of the outline (path and holes), for extents and scales."""
+        return np.concatenate([s.sample() for p in self.parts for s in p.segments])
+
+    def scaled(self, length: float) -> Outline:
+        def seg(s: Segment) -> Segment:
+            def sc(q):
+                return None if q is None else (q[0] * length, q[1] * length)
+            return Segment(sc(s.start), sc(s.end), sc(s.center))
+        return Outline(tuple(Part(p.name, tuple(map(seg, p.segments))) for p in self.path),
+                       tuple(Part(p.name, tuple(map(seg, p.segments))) for p in self.holes))
+
+
+def _point(v, what: str) -> tuple[float, float]:
+    return pair(v, what)
+
+
+def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Outline:
+    """The outline of a scene file: ``path`` a list of ``{name, to}`` (a line to ``to``) or
+    ``{name, to, center}`` (an arc), starting at ``start`` (the face's right end); ``holes`` a list
+    of ``{name, center, radius}`` (circles) or ``{name, points}`` (closed polygons)."""
+    if not isinstance(path, list) or not path:
+        raise SceneError(f"{where}.outline must be a non-empty list of parts, e.g. "
+                         "[{name = \"bottom\", to = [x, y]}, ...], got " + short(path))
+    parts, cur = [], start
+    for i, d in enumerate(path):
+        w = f"{where}.outline[{i}]"
+        if not isinstance(d, dict):
+            raise SceneError(f"{w} must be a table {{name, to}} or {{name, to, center}}, got {short(d)}")
+        extra = set(d) - {"name", "to", "center"}
+        if extra:
+            raise SceneError(f"{w}: unknown key {sorted(extra)[0]!r}; a part has name, to and (for an arc) center")
+        if "name" not in d or "to" not in d:
+            raise SceneError(f"{w}: missing key {'name' if 'name' not in d else 'to'!r}")
+        end = _point(d["to"], f"{w}.to")
+        center = None if "center" not in d else _point(d["center"], f"{w}.center")
+        parts.append(Part(text(d["name"], f"{w}.name"), (Segment(cur, end, center),)))
+        cur = end
+    if holes is None:
+        holes = []
+    if not isinstance(holes, list):
+        raise SceneError(f"{where}.holes must be a list of {{name, center, radius}} or {{name, points}}, "
+                         f"got {short(holes)}")
+    hs = []
+    for i, d in enumerate(holes):
+        w = f"{where}.holes[{i}]"
+        if not isinstance(d, dict) or "name" not in d:
+            raise SceneError(f"{w} must be a table with a name: {{name, center, radius}} or {{name, points}}")
+        keys = set(d) - {"name"}
+        name = text(d["name"], f"{w}.name")
+        if keys == {"center", "radius"}:
+            hs.append(circle(name, _point(d["center"], f"{w}.center"), number(d["radius"], f"{w}.radius", "positive")))
+        elif keys == {"points"}:
+            pts = d["points"]
+            if not isinstance(pts, list) or len(pts) < 3:
+                raise SceneError(f"{w}.points must list at least 3 corners, got {short(pts)}")
+            p = [_point(q, f"{w}.points[{j}]") for j, q in enumerate(pts)]
+            q = np.array(p)
+            if np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1]) < 0:
+                p = p[::-1]  # holes run counter-clockwise (the body on their right)
+            hs.append(Part(name, tuple(Segment(p[j], p[(j + 1) % len(p)]) for j in range(len(p)))))
+        else:
+            raise SceneError(f"{w}: give center and radius (a circle) or points (a polygon), got keys "
+                             f"{sorted(keys)}")
+    return Outline(tuple(parts), tuple(hs))
+
+
+def circle(name: str, center, radius: float) -> Part:
+    """A circular hole as four quarter arcs, starting at its right-most point."""
+    cx, cy = center
+    q = [(cx + radius, cy), (cx, cy + radius), (cx - radius, cy), (cx, cy - radius)]
+    return Part(name, tuple(Segment(q[j], q[(j + 1) % 4], (cx, cy)) for j in range(4)))
+
+
+def _crossings(a0, a1, b0, b1, tol):
+    """``(m, n)``: whether segment ``a_i`` and ``b_j`` meet (touching counts, up to ``tol``)."""
+    def cross(u, v):
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    da, db = (a1 - a0)[:, None], (b1 - b0)[None]
+    o1 = cross(da, b0[None] - a0[:, None])
+    o2 = cross(da, b1[None] - a0[:, None])
+    o3 = cross(db, a0[:, None] - b0[None])
+    o4 = cross(db, a1[:, None] - b0[None])
+    la = np.linalg.norm(da, axis=-1)
+    lb = np.linalg.norm(db, axis=-1)
+    t1, t2 = tol * la, tol * lb  # orientation tests scaled to distances
+    return (o1 * o2 <= t1**2) & (o3 * o4 <= t2**2) & _boxes_meet(a0, a1, b0, b1, tol)
+
+
+def _boxes_meet(a0, a1, b0, b1, tol):
+    lo_a, hi_a = np.minimum(a0, a1)[:, None], np.maximum(a0, a1)[:, None]
+    lo_b, hi_b = np.minimum(b0, b1)[None], np.maximum(b0, b1)[None]
+    return np.all((lo_a <= hi_b + tol) & (lo_b <= hi_a + tol), axis=-1)
+
+
+def _loop_polyline(face_pts: np.ndarray, outline: Outline):
+    """The closed boundary as polylines: ``(chains, owner)``: every chain is ``(k, 2)`` sampled
+    points, ``owner`` its part name (``"face"`` for the face)."""
+    chains = [(face_pts, "face")]
+    chains += [(s.sample(), p.name) for p in outline.parts for s in p.segments]
+    return chains
+
+
+def check_outline(outline: Outline, face, x_range, position: str, body: str) -> None:
+    """Raise :class:`SceneError` (one line) unless the outline closes on the face, encloses a
+    region on the body's side of the face, and no two of its segments cross."""
+    x0, x1 = x_range
+    left, right = (x0, float(face.value(x0))), (x1, float(face.value(x1)))
+    names = outline.names
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise SceneError(f"body {short(body)}: outline part {dup[0]!r} is named twice; give every part its own name")
+    if "face" in names:
+        raise SceneError(f"body {short(body)}: 'face' is the contact face's own name; name the outline part otherwise")
+    xs = np.linspace(x0, x1, FACE_SAMPLES)
+    face_pts = np.stack([xs, face.value(xs)], 1)
+    scale = float(np.ptp(np.concatenate([face_pts, outline.points()]), axis=0).max())
+    tol = 1e-9 * scale  # coordinates copied from the face's own numbers agree to rounding
+    start, end = outline.path[0].segments[0].start, outline.path[-1].segments[-1].end
+    if math.dist(start, right) > tol:
+        raise SceneError(f"body {short(body)}: the outline starts at ({start[0]:g}, {start[1]:g}), not at the face's "
+                         f"right end ({right[0]:g}, {right[1]:g}); start the path there")
+    if math.dist(end, left) > tol:
+        raise SceneError(f"body {short(body)}: the outline is open: its last part {outline.path[-1].name!r} ends at "
+                         f"({end[0]:g}, {end[1]:g}), not at the face's left end ({left[0]:g}, {left[1]:g}); "
+                         "end the path there")
+    for p in outline.parts:
+        for s in p.segments:
+            if math.dist(s.start, s.end) <= tol:
+                raise SceneError(f"body {short(body)}: outline part {p.name!r} has zero length; drop it")
+            if s.is_arc:
+                r0, r1 = math.dist(s.start, s.center), math.dist(s.end, s.center)
+                if abs(r0 - r1) > 1e-6 * max(r0, r1):  # a centre typed to 6 digits
+                    raise SceneError(f"body {short(body)}: arc {p.name!r} has its ends at different distances from "
+                                     f"its center ({r0:g} and {r1:g}); move the center or the end")
+                if abs(s.angles()[1]) > math.pi * (1 - 1e-9):
+                    raise SceneError(f"body {short(body)}: arc {p.name!r} turns half a circle or more; split it into "
+                                     "two parts (each arc turns less than 180 degrees)")
+    _check_crossings(_loop_polyline(face_pts, outline), tol, body)
+    # area sign of the closed path (face left-to-right, then the path): lower bodies run clockwise
+    ring = np.concatenate([face_pts] + [s.sample()[1:] for p in outline.path for s in p.segments])
+    area = 0.5 * np.sum(ring[:-1, 0] * ring[1:, 1] - ring[1:, 0] * ring[:-1, 1])
+    if (area > 0) != (position == "upper") or abs(area) <= tol * scale:
+        side = "above" if position == "upper" else "below"
+        raise SceneError(f"body {short(body)}: the outline does not enclose a region {side} the face (a {position} "
+                         "body); start at the face's right end and go round the body back to its left end")
+    from matplotlib.path import Path  # the point-in-polygon test of the hole check
+
+    ring_path = Path(ring)
+    for h in outline.holes:
+        pts = np.concatenate([s.sample() for s in h.segments])
+        if not np.all(ring_path.contains_points(pts)):
+            raise SceneError(f"body {short(body)}: hole {h.name!r} is not inside the body; move it inside the outline")
+
+
+def _check_crossings(chains, tol, body) -> None:
+    segs, owner, idx = [], [], []
+    for k, (pts, name) in enumerate(chains):
+        segs.append(np.stack([pts[:-1], pts[1:]], 1))
+        owner += [name] * (len(pts) - 1)
+        idx.append(np.full(len(pts) - 1, k))
+    S = np.concatenate(segs)
+    chain = np.concatenate(idx)
+    pos = np.concatenate([np.arange(len(s)) for s in segs])
+    n = len(S)
+    hit = np.zeros((n, n), bool)
+    block = 512  # rows per block: (512 x n) pairs at a time keep the memory flat
+    for i in range(0, n, block):
+        hit[i:i + block] = _crossings(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
+    # neighbours share an end: consecutive samples of one chain, and chain ends that meet
+    ends = [(c[0], c[-1]) for c, _ in chains]
+    first = np.array([np.flatnonzero(chain == k)[0] for k in range(len(chains))])
+    last = np.array([np.flatnonzero(chain == k)[-1] for k in range(len(chains))])
+    same_chain = (chain[:, None] == chain[None]) & (np.abs(pos[:, None] - pos[None]) <= 1)
+    hit &= ~same_chain
+    for a in range(len(chains)):
+        for b in range(len(chains)):
+            for ia, pa in ((first[a], ends[a][0]), (last[a], ends[a][1])):
+                for ib, pb in ((first[b], ends[b][0]), (last[b], ends[b][1])):
+                    if a != b and math.dist(pa, pb) <= tol:
+                        hit[ia, ib] = hit[ib, ia] = False
+    i, j = np.nonzero(np.triu(hit, 1))
+    if len(i):
+        a, b = owner[i[0]], owner[j[0]]
+        where = S[i[0]].mean(0)
+        what = f"part {a!r} crosses itself" if a == b else f"parts {a!r} and {b!r} cross or touch"
+        raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
+                         f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")

@@ -1,0 +1,241 @@
+"""Outline bodies (general plane bodies meshed by gmsh beyond the strip of columns along the face):
+exactness of both stress spaces on unstructured meshes, Kirsch's hole, the certified bounds with free
+arcs, determinism of the meshes, the outline checks and the refusals of malformed outlines."""
+
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import without_progress
+
+import cvxdual as cd
+from cvxdual.cli import main
+from cvxdual.eq.fields import StressField
+from cvxdual.errors import MeshError
+from cvxdual.geometry.boundary import supported
+from cvxdual.geometry.mesh import build_mesh
+from cvxdual.geometry.triangulation import discretize
+from cvxdual.scene import load_scene
+
+PATCH = """base = "patch"
+name = "patch-outline"
+[exact]
+kind = "uniform"
+stress = [0.0, -100.0, 0.0]
+any_material = true
+[bodies.top]
+outline = [{name = "right", to = [10.0, 6.0]}, {name = "far", to = [0.0, 6.0]}, {name = "left", to = [0.0, 0.0]}]
+[bodies.bottom]
+outline = [{name = "right", to = [10.0, -4.0]}, {name = "far", to = [0.0, -4.0]}, {name = "left", to = [0.0, 0.0]}]
+"""
+
+
+@pytest.fixture(scope="module")
+def patch_outline(tmp_path_factory):
+    f = tmp_path_factory.mktemp("scenes") / "patch-outline.toml"
+    f.write_text(PATCH)
+    return load_scene(str(f))
+
+
+@pytest.mark.parametrize("space", ["p0", "eq"])
+@pytest.mark.parametrize("level", [1, 2, 3])
+def test_patch_on_unstructured_meshes_is_exact(patch_outline, space, level):
+    """The uniform stress lies in both spaces, so both reproduce it on gmsh's meshes: 1e-8 relative
+    leaves 1e3 times the direct solves' rounding (1e-12 to 1e-11 seen)."""
+    sol = cd.solve(patch_outline, level=level, stress_space=space, solver="fast")
+    assert sol.mesh.bodies[0].rest is not None  # gmsh meshed beyond the strip
+    assert sol.error["l2_rel"] <= 1e-8
+
+
+def test_patch_outline_mesh_is_unstructured_and_conforming(patch_outline):
+    mesh = build_mesh(patch_outline, 2)
+    bm = mesh.bodies[1]
+    # gmsh adds nodes off the columns: not a column mesh
+    assert not np.all(np.isin(np.round(mesh.points[bm.offset + bm.n_strip_nodes:, 0], 12), np.round(bm.columns, 12)))
+    # conforming: every interior edge is shared by exactly two triangles, boundary edges by one, and
+    # the boundary edges are exactly those of the named parts and the face
+    tris = bm.triangles()
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    keys, count = np.unique(e[:, 0] * mesh.n_nodes + e[:, 1], return_counts=True)
+    assert set(count) <= {1, 2}
+    boundary = set(keys[count == 1])
+    named = set()
+    for side in ("face", "right", "far", "left"):
+        n = bm.side_nodes(side)
+        named |= set(np.minimum(n[:-1], n[1:]) * mesh.n_nodes + np.maximum(n[:-1], n[1:]))
+    assert boundary == named
+    d1, d2 = mesh.points[tris[:, 1]] - mesh.points[tris[:, 0]], mesh.points[tris[:, 2]] - mesh.points[tris[:, 0]]
+    area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    assert area.sum() == pytest.approx(40.0, rel=1e-12)  # the 10 x 4 block, to rounding
+
+
+def test_meshes_are_deterministic_across_processes(patch_outline, tmp_path):
+    """Same input, same mesh: gmsh on one thread with a fixed algorithm, in a fresh process."""
+    f = tmp_path / "p.toml"
+    f.write_text(PATCH)
+    code = ("import hashlib, sys; from cvxdual.scene import load_scene; from cvxdual.geometry.mesh import build_mesh;"
+            f"m = build_mesh(load_scene({str(f)!r}), 2);"
+            "print(hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest())")
+    runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+            for _ in range(2)}
+    m = build_mesh(patch_outline, 2)
+    import hashlib
+    here = hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest()
+    assert runs == {here + "\n"}
+
+
+def test_sliding_supports_on_named_parts(patch_outline):
+    mesh = build_mesh(patch_outline, 1)
+    fixed = supported(mesh)
+    bottom = mesh.bodies[1]
+    left, far = bottom.side_nodes("left"), bottom.side_nodes("far")
+    assert np.all(fixed[left, 0]) and np.all(fixed[far, 1])  # u_x on the vertical line, u_y on the horizontal
+    assert not np.any(fixed[bottom.side_nodes("right")[1:-1]])
+
+
+def _hoop(sol):
+    """sigma_yy at the hole's sides and sigma_xx at its top and bottom, just inside the body."""
+    r, eps = 0.5, 1e-7
+    pts = np.array([[r + eps, -10.0], [-r - eps, -10.0], [0.0, -10.0 + r + eps], [0.0, -10.0 - r - eps]])
+    s, _ = StressField.of(sol).at(pts, np.ones(4, int))
+    return s[:2, 1], s[2:, 0]
+
+
+def test_kirsch_hole_hoop_stress_and_certified_bounds():
+    """Kirsch: -3 q at the hole's sides, +q at its top and bottom (q = 100). The eq space at the
+    finest level gets the sides within 2 % (the issue's acceptance; 1.1 % seen at level 3: 128
+    edges round the hole); the free hole keeps the bounds certified for the round hole."""
+    sol = cd.solve("block-with-hole", level=3, stress_space="eq", solver="fast")
+    sides, poles = _hoop(sol)
+    assert np.all(np.abs(sides / -300.0 - 1) <= 0.02)
+    assert np.all(np.abs(poles / 100.0 - 1) <= 0.03)  # +q: a smaller stress, a coarser relative fit (1 % seen)
+    b = sol.bounds
+    assert b["guaranteed"], b["reasons"]
+    assert b["energy_lower"] <= b["energy_upper"]
+
+
+def test_kirsch_converges_from_below():
+    """The peak stress is resolved better with each level: the sides' error falls level by level."""
+    err = [np.max(np.abs(_hoop(cd.solve("block-with-hole", level=L, stress_space="eq", solver="fast"))[0] / -300 - 1))
+           for L in (1, 2)]
+    assert err[1] < err[0] < 0.06  # 4.8 % and 2.2 % seen at levels 1 and 2
+
+
+def test_free_arcs_keep_bounds_certified_and_nested():
+    """The roller's free flanks (convex arcs: chords) and the hole (concave: tangent polygon) are
+    exact: every bracket is certified and consecutive brackets share a point."""
+    scene = load_scene("examples/roller-on-block.toml")
+    brackets = []
+    for level in (1, 2):
+        b = cd.solve(scene, level=level, stress_space="eq", solver="fast").bounds
+        assert b["guaranteed"], b["reasons"]
+        brackets.append((b["energy_lower"], b["energy_upper"]))
+    assert max(lo for lo, _ in brackets) <= min(hi for _, hi in brackets)
+
+
+def test_continuation_energy_is_counted():
+    """The displacement's energy beyond the free arcs is part of J(v): without it the upper end
+    would be the energy of a smaller body, not a bound for the round one."""
+    mesh, _, _ = discretize(load_scene("block-with-hole"), "type1", 1)
+    nodes, weight, body = mesh.continuation()
+    assert len(weight) == 4 * 4 * 2  # four quarter arcs, 4 * 2**level corners each
+    assert np.all(body == 1) and np.all(weight > 0)
+    # the corners lie between the tangent polygon and the circle: outside the radius, inside r / cos
+    p = mesh.points[nodes[:, 1]] - np.array([0.0, -10.0])
+    rad = np.hypot(p[:, 0], p[:, 1])
+    assert np.all(rad > 0.5) and np.allclose(rad, 0.5 / np.cos(np.pi / 32), rtol=1e-12)
+
+
+def test_loaded_curved_part_is_not_certified():
+    """A loaded arc is meshed as gmsh's polygon: the bounds say why they are not guaranteed."""
+    scene = load_scene("examples/roller-on-block.toml")
+    b0 = scene.bodies[0]
+    part = cd.BoundaryPart(on="flank-right", kind="traction", traction=cd.Traction("uniform", (0.0, -1.0)), name="push")
+    scene = replace(scene, bodies=(replace(b0, boundary=b0.boundary + (part,)), scene.bodies[1]))
+    b = cd.solve(scene, level=1, stress_space="eq", solver="fast").bounds
+    assert not b["guaranteed"] and any("flank-right" in r for r in b["reasons"])
+
+
+def test_missing_gmsh_is_one_line(monkeypatch, patch_outline):
+    """Where gmsh's wheel cannot load a system library, an outline scene gets one line naming it
+    and its package; column scenes do not import gmsh at all."""
+    import builtins
+    real = builtins.__import__
+
+    def broken(name, *args, **kwargs):
+        if name == "gmsh":
+            raise OSError("libGLU.so.1: cannot open shared object file: No such file or directory")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", broken)
+    monkeypatch.delitem(sys.modules, "gmsh", raising=False)
+    with pytest.raises(MeshError, match="libGLU.*apt-get install libglu1-mesa"):
+        build_mesh(patch_outline, 0)
+    build_mesh(load_scene("patch"), 0)  # a column scene needs no gmsh
+
+
+# -- malformed outlines: one line, exit 1, nothing written ---------------------------------------
+
+HOLE = 'base = "block-with-hole"\n'
+LOWER = "[bodies.bottom]\n"
+
+
+def _outline(*parts):
+    return "outline = [" + ", ".join(parts) + "]\n"
+
+
+RIGHT, BOTTOM, LEFT = ('{name = "right", to = [10.0, -20.0]}', '{name = "bottom", to = [-10.0, -20.0]}',
+                       '{name = "left", to = [-10.0, 0.0]}')
+MALFORMED = [
+    ("open", _outline(RIGHT, BOTTOM, '{name = "left", to = [-10.0, -1.0]}'), "is open"),
+    ("self-intersecting", _outline('{name = "right", to = [-10.0, -20.0]}', '{name = "bottom", to = [10.0, -20.0]}',
+                                   '{name = "left", to = [-10.0, 0.0]}'), "self-intersecting"),
+    ("named twice", _outline(RIGHT, '{name = "right2", to = [-10.0, -20.0]}', '{name = "right", to = [-10.0, 0.0]}'),
+     "named twice"),
+    ("named face", _outline(RIGHT, '{name = "face", to = [-10.0, -20.0]}', LEFT), "own name"),
+    ("unknown part", '[bodies.bottom.boundary.support]\non = "base"\n', "not a part of its outline"),
+    ("column side name", '[bodies.bottom.boundary.support]\non = "far"\n', "name one of its parts"),
+    ("arc radii", _outline(RIGHT, '{name = "bottom", to = [-10.0, -20.0], center = [1.0, -10.0]}', LEFT),
+     "different distances"),
+    ("half turn", _outline('{name = "right", to = [10.0, -20.0], center = [10.0, -10.0]}', BOTTOM, LEFT),
+     "half a circle"),
+    ("hole outside", 'holes = [{name = "hole", center = [0.0, -30.0], radius = 0.5}]\n', "not inside"),
+    ("hole crossing", 'holes = [{name = "hole", center = [0.0, -19.8], radius = 0.5}]\n', "self-intersecting"),
+    ("holes overlapping", 'holes = [{name = "a", center = [0.0, -10.0], radius = 0.5}, '
+     '{name = "b", center = [0.5, -10.0], radius = 0.5}]\n', "self-intersecting"),
+    ("zero length", _outline(RIGHT, '{name = "dot", to = [10.0, -20.0]}', BOTTOM, LEFT), "zero length"),
+    ("wrong way", _outline('{name = "right", to = [10.0, 20.0]}', '{name = "bottom", to = [-10.0, 20.0]}', LEFT),
+     "does not enclose"),
+    ("slanted sliding", _outline(RIGHT, '{name = "bottom", to = [-10.0, -21.0]}', LEFT), "not a horizontal"),
+    ("interval on a part", '[bodies.bottom.boundary.support]\ninterval = [-5.0, 5.0]\n', "split the part"),
+    ("outline not a list", 'outline = "box"\n', "non-empty list"),
+    ("part without to", _outline(RIGHT, '{name = "bottom"}', LEFT), "missing key 'to'"),
+    ("unknown part key", _outline(RIGHT, '{name = "bottom", to = [-10.0, -20.0], radius = 1.0}', LEFT),
+     "unknown key 'radius'"),
+    ("hole keys", 'holes = [{name = "hole", center = [0.0, -10.0]}]\n', "give center and radius"),
+    ("two-point polygon", 'holes = [{name = "slot", points = [[0.0, -10.0], [1.0, -10.0]]}]\n', "at least 3"),
+    ("far disagrees", "far = -30.0\n", "but its outline reaches"),
+]
+
+
+@pytest.mark.parametrize("body,words", [(b, w) for _, b, w in MALFORMED], ids=[i for i, _, _ in MALFORMED])
+def test_malformed_outline_is_refused_in_one_line(tmp_path, monkeypatch, capsys, body, words):
+    monkeypatch.chdir(tmp_path)
+    text = HOLE + (body if body.startswith("[") else LOWER + body)
+    (tmp_path / "bad.toml").write_text(text)
+    before = set(tmp_path.rglob("*"))
+    rc = main(["solve", "--scene", "bad.toml", "--level", "0", "--no-plots"])
+    err = without_progress(capsys.readouterr().err)
+    assert rc == 1
+    assert len(err) == 1 and err[0].startswith("cvxdual: error:") and words in err[0], err
+    assert set(tmp_path.rglob("*")) == before
+
+
+def test_polygon_holes_run_counter_clockwise():
+    from cvxdual.scene.outline import outline_from_dict
+    o = outline_from_dict([{"name": "a", "to": [0.0, -1.0]}], [{"name": "h", "points": [[0, 0], [0, 1], [1, 0]]}],
+                          (1.0, 0.0), "t")
+    p = np.array([s.start for s in o.holes[0].segments])
+    assert np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]) > 0
