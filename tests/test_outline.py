@@ -217,7 +217,76 @@ MALFORMED = [
     ("hole keys", 'holes = [{name = "hole", center = [0.0, -10.0]}]\n', "give center and radius"),
     ("two-point polygon", 'holes = [{name = "slot", points = [[0.0, -10.0], [1.0, -10.0]]}]\n', "at least 3"),
     ("far disagrees", "far = -30.0\n", "but its outline reaches"),
+    ("strip meets a hole", 'holes = [{name = "hole", center = [0.0, -0.8], radius = 0.5}]\n',
+     "meets the outline part 'hole'"),
 ]
+
+
+GEO_BLOCK = """Point(1) = {10, 0, 0}; Point(2) = {10, -20, 0}; Point(3) = {-10, -20, 0}; Point(4) = {-10, 0, 0};
+Line(1) = {4, 1}; Line(2) = {1, 2}; Line(3) = {2, 3}; Line(4) = {3, 4};
+"""
+GEO_SCENE = """name = "geo"
+[bodies.top]
+position = "upper"
+x = [-10.0, 10.0]
+face = { kind = "flat", y0 = 0.0 }
+material = { E = 70000.0, nu = 0.3 }
+outline = [{ name = "right", to = [10.0, 4.0] }, { name = "top", to = [-10.0, 4.0] },
+           { name = "left", to = [-10.0, 0.0] }]
+[bodies.top.boundary.pressure]
+on = "top"
+kind = "traction"
+traction = { value = [0.0, -100.0] }
+[bodies.bottom]
+position = "lower"
+material = { E = 210000.0, nu = 0.3 }
+geo = "b.geo"
+[bodies.bottom.boundary.support]
+on = "bottom"
+kind = "clamped"
+"""
+NAMES = 'Physical Curve("face") = {1};\nPhysical Curve("right") = {2};\nPhysical Curve("bottom") = {3};\n'
+GEO_BAD = [
+    ("geo without face", GEO_BLOCK + 'Physical Curve("top") = {1};\nPhysical Curve("bottom") = {3};', "named 'face'"),
+    ("geo unnamed curve", GEO_BLOCK + NAMES + "Physical Curve(7) = {4};", "has no name"),
+    ("geo slanted face", GEO_BLOCK.replace("Point(4) = {-10, 0, 0}", "Point(4) = {-10, 1, 0}")
+     + NAMES + 'Physical Curve("left") = {4};', "not horizontal"),
+    ("geo spline", GEO_BLOCK.replace("Line(3) = {2, 3};", "Point(9) = {0, -21, 0}; Spline(3) = {2, 9, 3};")
+     + NAMES + 'Physical Curve("left") = {4};', "is a Nurb curve"),
+    ("geo open", GEO_BLOCK + NAMES, "is open"),
+    ("geo syntax", "Point(1) = {10, 0", "cannot read"),
+]
+
+
+@pytest.mark.parametrize("geo,words", [(g, w) for _, g, w in GEO_BAD], ids=[i for i, _, _ in GEO_BAD])
+def test_malformed_geo_is_refused_in_one_line(tmp_path, monkeypatch, capsys, geo, words):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "b.geo").write_text(geo)
+    (tmp_path / "bad.toml").write_text(GEO_SCENE)
+    before = set(tmp_path.rglob("*"))
+    rc = main(["solve", "--scene", "bad.toml", "--level", "0", "--no-plots"])
+    err = without_progress(capsys.readouterr().err)
+    assert rc == 1
+    assert len(err) == 1 and err[0].startswith("cvxdual: error:") and words in err[0], err
+    assert set(tmp_path.rglob("*")) == before
+
+
+def test_geo_and_outline_keys_together_are_refused(tmp_path):
+    (tmp_path / "b.geo").write_text(GEO_BLOCK + NAMES + 'Physical Curve("left") = {4};')
+    (tmp_path / "s.toml").write_text(GEO_SCENE.replace('geo = "b.geo"', 'geo = "b.geo"\nx = [-10.0, 10.0]'))
+    with pytest.raises(cd.errors.SceneError, match="either geo"):
+        load_scene(str(tmp_path / "s.toml"))
+
+
+def test_geo_body_is_the_toml_body():
+    """examples/block-with-hole-geo.toml reads its lower block from a .geo file: the same mesh (bit
+    for bit: the file's own centre point is taken for the hole's arcs) and the same solution."""
+    a, b = load_scene("block-with-hole"), load_scene("examples/block-with-hole-geo.toml")
+    assert a.bodies[1].outline == b.bodies[1].outline and a.bodies[1].face == b.bodies[1].face
+    ma, mb = build_mesh(a, 2), build_mesh(b, 2)
+    assert np.array_equal(ma.points, mb.points) and np.array_equal(ma.triangles(), mb.triangles())
+    sa, sb = (cd.solve(s, level=1, stress_space="eq", solver="fast") for s in (a, b))
+    assert np.array_equal(np.asarray(sa.stress), np.asarray(sb.stress))
 
 
 @pytest.mark.parametrize("body,words", [(b, w) for _, b, w in MALFORMED], ids=[i for i, _, _ in MALFORMED])
@@ -239,3 +308,14 @@ def test_polygon_holes_run_counter_clockwise():
                           (1.0, 0.0), "t")
     p = np.array([s.start for s in o.holes[0].segments])
     assert np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]) > 0
+
+
+def test_plots_draw_the_true_outline():
+    """The drawn outline of an outline body follows its arcs (the hole round, not the mesh's
+    polygon) and closes on the face."""
+    from cvxdual.outputs.plots import body_outline
+    body = load_scene("block-with-hole").bodies[1]
+    outer, hole = body_outline(body)
+    assert np.allclose(outer[0], outer[-1])  # closed: back at the face's left end
+    r = np.hypot(hole[:, 0], hole[:, 1] + 10.0)
+    assert np.allclose(r, 0.5, rtol=1e-14)

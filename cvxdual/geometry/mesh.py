@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import MeshError
 from ..scene.scene import Body, Scene
 from ..validate import short
-from .outline_mesh import RestMesh, mesh_rest, strip_depth
+from .outline_mesh import RestMesh, held_parts, mesh_rest, strip_depth
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
 PROBE_COLUMNS = 64  # outline bodies are counted on a mesh of at most this many columns, scaled up (0.1 s)
@@ -114,7 +114,7 @@ def _probe_rest(scene: Scene, body: Body, level: int, cols: float, extra) -> flo
     """gmsh's triangles beyond the strip of an outline body at ``level``, bounded from above
     without meshing at that level: meshed at the highest level with at most
     :data:`PROBE_COLUMNS` columns, times 4 per level above it (every size halves per level, so
-    the count grows by at most 4: 2.8-3.9 measured, docs/outlines.md)."""
+    the count grows by at most 4: 2.8-3.9 measured, reports/outlines.md)."""
     probe = level - max(0, math.ceil(math.log2(max(cols, 1.0) / PROBE_COLUMNS)))
     probe = max(probe, 0)
     c = column_abscissae(scene, probe, extra)
@@ -271,8 +271,7 @@ class Mesh:
         for bm in self.bodies:
             if bm.rest is None:
                 continue
-            held = {p.on for p in bm.body.boundary if p.kind != "traction" or p.traction.kind != "uniform"
-                    or any(p.traction.value)}
+            held = held_parts(bm.body)
             out += [f"{bm.body.name}.{p.name}" for p in bm.body.outline.parts if p.is_curved and p.name in held]
         return out
 

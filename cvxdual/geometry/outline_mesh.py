@@ -24,34 +24,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MeshError
-from ..scene.outline import Segment
+from ..scene.geo import import_gmsh
+from ..scene.outline import Segment, segments_meet
 
 GROWTH = 0.4  # element size grows by 0.4 times the distance from the strip (a mild grading)
 STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells
 ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level)
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
 
-# the system libraries gmsh's wheel links, and the Debian/Ubuntu packages that provide them
-SYSTEM_PACKAGES = {"libGLU": "libglu1-mesa", "libXcursor": "libxcursor1", "libXft": "libxft2",
-                   "libXinerama": "libxinerama1", "libX11": "libx11-6", "libXrender": "libxrender1",
-                   "libfontconfig": "libfontconfig1", "libXext": "libxext6", "libXfixes": "libxfixes3",
-                   "libgomp": "libgomp1"}
 
-
-def import_gmsh():
-    """The gmsh module, or a :class:`MeshError` naming what is missing and how to get it."""
-    try:
-        import gmsh
-    except (ImportError, OSError) as e:  # a missing system library raises OSError from the wheel's loader
-        msg = str(e)
-        for lib, pkg in SYSTEM_PACKAGES.items():
-            if lib in msg:
-                raise MeshError(f"outline bodies need gmsh, which cannot load the system library {lib} "
-                                f"({msg.split(':')[0]}); install it (Debian/Ubuntu: apt-get install {pkg}) "
-                                "or use column bodies") from None
-        raise MeshError(f"outline bodies need gmsh, which cannot be imported ({msg}); pip install gmsh, or use "
-                        "column bodies") from None
-    return gmsh
+def held_parts(body) -> set[str]:
+    """The outline parts a support or a nonzero load acts on (the rest is traction free)."""
+    return {bp.on for bp in body.boundary
+            if bp.kind != "traction" or bp.traction.kind != "uniform" or any(bp.traction.value)}
 
 
 @dataclass(frozen=True)
@@ -165,6 +150,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
             fixed.append(c)
         return c
 
+    _check_strip(body, chain)
     chain_pts = [point(chain[i], w[i]) for i in range(nc)]
     ends = {"right": (body.x_range[1], float(face_y[-1])), "left": (body.x_range[0], float(face_y[0]))}
     loop: list[int] = []  # signed curve tags of the outer loop, from the right end of the chain
@@ -184,8 +170,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     trim_last = _continues_side(last, ends["left"], chain[0], body.sign, at_end=True)
     if trim_last:
         path[-1] = (last_name, Segment(last.start, tuple(chain[0]), last.center))
-    loaded = {bp.on for bp in body.boundary if bp.kind != "traction" or any(bp.traction.value)
-              or bp.traction.kind != "uniform"}
+    loaded = held_parts(body)
     virtual: list[tuple] = []  # (kind, node geometry points, weight) of each free arc's pieces
 
     def curve(name, s, concave) -> list[int]:
@@ -287,6 +272,21 @@ def _virtual(gmsh, virtual, lookup, tris, allp) -> tuple[np.ndarray, np.ndarray]
             nodes.append([int(v) for v in tris[t]])
             weight.append(w)
     return np.asarray(nodes, int), np.asarray(weight, float)
+
+
+def _check_strip(body, chain: np.ndarray) -> None:
+    """The strip's inner chain must stay inside the body (gmsh would fail, or mesh across)."""
+    a0, a1 = chain[:-1].copy(), chain[1:].copy()
+    a0[0] += 1e-6 * (a1[0] - a0[0])  # the chain's ends may lie on a side of the outline
+    a1[-1] -= 1e-6 * (a1[-1] - a0[-1])
+    scale = float(np.ptp(chain, axis=0).max())
+    for p in body.outline.parts:
+        pts = np.concatenate([s.sample() for s in p.segments])
+        if np.any(segments_meet(a0, a1, pts[:-1], pts[1:], 1e-12 * scale)):
+            raise MeshError(f"body {body.name!r}: the strip of columns along its face (one column spacing deep, "
+                            f"{abs(chain[:, 1] - body.face.value(chain[:, 0])).max():.3g} at most here) meets the "
+                            f"outline part {p.name!r}; raise the level (the strip thins with h) or move {p.name!r} "
+                            "away from the face")
 
 
 def _match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:

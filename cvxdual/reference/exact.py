@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene.scene import Scene
-from .hertz import HertzData, body_stress, hertz_line_contact, hertz_pressure
+from .hertz import HertzData, body_stress, contact_modulus, hertz_line_contact, hertz_pressure
+from .punch import PunchData, punch_body_stress, punch_contact, punch_pressure
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,29 @@ class HertzField:
         return {"kind": "hertz", "a": h.a, "p0": h.p0, "E_star": h.E_star, "R": h.R, "load": h.load}
 
 
+@dataclass(frozen=True)
+class PunchField:
+    """Flamant superposition of the rounded flat punch's pressure, on faces ``y = y_face``."""
+
+    punch: PunchData
+    xc: float
+    y_face: float
+
+    @property
+    def half_width(self) -> float:
+        return self.punch.a
+
+    def stress(self, body: int, pts: np.ndarray) -> np.ndarray:
+        return punch_body_stress(pts[:, 0], pts[:, 1], self.punch, self.xc, self.y_face, upper=(body == 0))
+
+    def pressure(self, x: np.ndarray) -> np.ndarray:
+        return punch_pressure(np.asarray(x, float) - self.xc, self.punch)
+
+    def data(self) -> dict:
+        d = self.punch
+        return {"kind": "punch", "a": d.a, "b": d.b, "E_star": d.E_star, "R": d.R, "load": d.load}
+
+
 def exact_field(scene: Scene):
     """The exact field of ``scene`` or ``None``."""
     spec = scene.exact
@@ -61,13 +85,23 @@ def exact_field(scene: Scene):
         return UniformField(spec.stress)
     up, lo = scene.upper, scene.lower
     if abs(up.face.y0 - lo.face.y0) > 1e-12 * scene.length_scale:
-        raise SceneError("the 'hertz' exact field needs both flat faces at the same height")
+        raise SceneError(f"the '{spec.kind}' exact field needs both flat faces at the same height")
+    if spec.kind == "punch":
+        E_star = contact_modulus(up.material.E, up.material.nu, lo.material.E, lo.material.nu, up.material.plane)
+        try:
+            return PunchField(punch_contact(spec.b, spec.R, E_star, spec.load), spec.xc, up.face.y0)
+        except ValueError as e:
+            raise SceneError(f"exact field 'punch': {e}") from None
     try:
         data = hertz_line_contact(up.material.E, up.material.nu, lo.material.E, lo.material.nu,
                                   spec.R, spec.load, plane=up.material.plane)
     except ValueError as e:
         raise SceneError(f"exact field 'hertz': {e}") from None
     return HertzField(data, spec.xc, up.face.y0)
+
+
+def spec_name(field) -> str:
+    return "Hertz" if isinstance(field, HertzField) else "punch"
 
 
 def exact_reference(scene: Scene):
@@ -79,14 +113,16 @@ def exact_reference(scene: Scene):
     if scene.exact is None or why is not None:
         return None, why
     field = exact_field(scene)
-    if isinstance(field, HertzField):
+    if isinstance(field, HertzField | PunchField):
         # the closed form presses the faces together on [xc - a, xc + a]; where that lies on both
         # bodies, it must be free to touch (a is computed from the loads, which may have changed)
         lo, hi = max(b.x_range[0] for b in scene.bodies), min(b.x_range[1] for b in scene.bodies)
-        z0, z1 = max(field.xc - field.hertz.a, lo), min(field.xc + field.hertz.a, hi)
+        half = field.hertz.a if isinstance(field, HertzField) else field.punch.a
+        z0, z1 = max(field.xc - half, lo), min(field.xc + half, hi)
         a, b = scene.contact
         tol = 1e-9 * (hi - lo)
         if z0 < z1 and (z0 < a - tol or z1 > b + tol):
-            return None, (f"the Hertz contact zone [{z0:.4g}, {z1:.4g}] reaches out of the candidate contact interval "
+            return None, (f"the {spec_name(field)} contact zone [{z0:.4g}, {z1:.4g}] reaches out of the candidate "
+                          "contact interval "
                           f"[{a:.4g}, {b:.4g}], so the exact field does not solve this problem")
     return field, None

@@ -46,6 +46,19 @@ def _poisson(name: str, value) -> float:
     return v
 
 
+def contact_modulus(E1, nu1, E2, nu2, plane: str = "strain") -> float:
+    """``E*``: plane strain ``1/E* = (1 - nu1^2)/E1 + (1 - nu2^2)/E2``, plane stress ``1/E1 + 1/E2``."""
+    E1, E2 = _positive("E1", E1), _positive("E2", E2)
+    nu1, nu2 = _poisson("nu1", nu1), _poisson("nu2", nu2)
+    if plane == "strain":
+        compliance = (1.0 - nu1**2) / E1 + (1.0 - nu2**2) / E2
+    elif plane == "stress":
+        compliance = 1.0 / E1 + 1.0 / E2
+    else:
+        raise ValueError(f"plane must be 'strain' or 'stress', got {plane!r}")
+    return 1.0 / compliance
+
+
 def hertz_line_contact(E1, nu1, E2, nu2, R, load, plane: str = "strain") -> HertzData:
     """Hertz line contact of two cylinders (or cylinder on plane) of effective radius ``R``
     (``1/R = 1/R1 + 1/R2``, pass ``R`` directly) under ``load`` per unit length.
@@ -55,16 +68,8 @@ def hertz_line_contact(E1, nu1, E2, nu2, R, load, plane: str = "strain") -> Hert
     Raises ``ValueError`` for non-positive or non-finite ``E``, ``R``, ``load``, or ``nu``
     outside ``(-1, 0.5]``.
     """
-    E1, E2 = _positive("E1", E1), _positive("E2", E2)
-    nu1, nu2 = _poisson("nu1", nu1), _poisson("nu2", nu2)
     R, load = _positive("R", R), _positive("load", load)
-    if plane == "strain":
-        compliance = (1.0 - nu1**2) / E1 + (1.0 - nu2**2) / E2
-    elif plane == "stress":
-        compliance = 1.0 / E1 + 1.0 / E2
-    else:
-        raise ValueError(f"plane must be 'strain' or 'stress', got {plane!r}")
-    E_star = 1.0 / compliance
+    E_star = contact_modulus(E1, nu1, E2, nu2, plane)
     a = float(np.sqrt(4.0 * load * R / (np.pi * E_star)))
     p0 = 2.0 * load / (np.pi * a)
     return HertzData(a=a, p0=p0, E_star=E_star, R=R, load=load)

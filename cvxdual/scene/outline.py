@@ -191,7 +191,7 @@ def circle(name: str, center, radius: float) -> Part:
     return Part(name, tuple(Segment(q[j], q[(j + 1) % 4], (cx, cy)) for j in range(4)))
 
 
-def _crossings(a0, a1, b0, b1, tol):
+def segments_meet(a0, a1, b0, b1, tol):
     """``(m, n)``: whether segment ``a_i`` and ``b_j`` meet (touching counts, up to ``tol``)."""
     def cross(u, v):
         return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
@@ -285,7 +285,7 @@ def _check_crossings(chains, tol, body) -> None:
     hit = np.zeros((n, n), bool)
     block = 512  # rows per block: (512 x n) pairs at a time keep the memory flat
     for i in range(0, n, block):
-        hit[i:i + block] = _crossings(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
+        hit[i:i + block] = segments_meet(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
     # neighbours share an end: consecutive samples of one chain, and chain ends that meet
     ends = [(c[0], c[-1]) for c, _ in chains]
     first = np.array([np.flatnonzero(chain == k)[0] for k in range(len(chains))])

@@ -24,7 +24,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import SceneError
-from ..validate import number, short, table
+from ..validate import number
 
 
 @dataclass(frozen=True)
@@ -255,30 +255,3 @@ class Cosine(Profile):
         m = np.arange(np.ceil((x0 - self.x0 - q / 2) / q), np.floor((x1 - self.x0 - q / 2) / q) + 1)
         xs = self.x0 + q / 2 + m * q
         return xs[(xs > x0) & (xs < x1)]
-
-
-PROFILE_KINDS: dict[str, type[Profile]] = {
-    "flat": Flat,
-    "parabola": Parabola,
-    "circle": Circle,
-    "cosine": Cosine,
-}
-
-
-def profile_from_dict(d: dict, where: str) -> Profile:
-    """Build a profile from a scene-file table such as ``{kind = "parabola", R = 50}``."""
-    d = dict(table(d, where))
-    kind = d.pop("kind", None)
-    if not isinstance(kind, str) or kind not in PROFILE_KINDS:
-        raise SceneError(f"{where}: unknown profile kind {short(kind)}; choose one of {sorted(PROFILE_KINDS)}")
-    cls: type[Profile] = PROFILE_KINDS[kind]
-    if kind == "circle":
-        branch = d.pop("branch", "lower")
-        if branch not in ("lower", "upper"):
-            raise SceneError(f"{where}: circle branch must be 'lower' or 'upper', got {branch!r}")
-        cls = LowerCircle if branch == "lower" else UpperCircle
-    names = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - names)
-    if unknown:
-        raise SceneError(f"{where}: unknown key(s) {unknown} for a {kind} profile; allowed: {sorted(names)}")
-    return cls(**d)

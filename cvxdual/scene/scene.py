@@ -228,6 +228,7 @@ class ExactSpec:
     R: float | None = None
     load: float | None = None
     xc: float = 0.0
+    b: float | None = None  # punch: the flat's half-width
     any_material: bool = False
     declared_for: tuple | None = field(default=None, compare=False, repr=False)
 
@@ -244,14 +245,20 @@ class ExactSpec:
             if not any(self.stress):
                 raise SceneError("exact field 'uniform' with zero stress: errors relative to it are undefined; "
                                  "give a nonzero stress or drop the [exact] table")
-        elif self.kind == "hertz":
+        elif self.kind in ("hertz", "punch"):
+            if self.kind == "punch":
+                if self.b is None or number(self.b, "exact field 'punch' b", "nonnegative") < 0:
+                    raise SceneError(f"exact field 'punch' needs the flat's half-width b >= 0, got {self.b!r}")
+                object.__setattr__(self, "b", float(self.b))
+            elif self.b is not None:
+                raise SceneError("exact field 'hertz' has no b (a flat's half-width): use kind = 'punch'")
             for name in ("R", "load"):
                 v = getattr(self, name)
                 if v is None or number(v, f"exact field 'hertz' {name}", "positive") <= 0:
                     raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
-            raise SceneError(f"exact field kind must be 'uniform' or 'hertz', got {short(self.kind)}")
+            raise SceneError(f"exact field kind must be 'uniform', 'hertz' or 'punch', got {short(self.kind)}")
         object.__setattr__(self, "xc", number(self.xc, "exact field xc"))
 
 
@@ -356,15 +363,16 @@ class Scene:
                     if lo_ < b and hi_ > a:
                         raise SceneError(f"body {body.name!r}: support {part.name!r} overlaps the contact "
                                          f"interval [{a:g}, {b:g}]; a contact face cannot be supported")
-        if self.exact is not None and self.exact.kind == "hertz":
+        if self.exact is not None and self.exact.kind in ("hertz", "punch"):
+            k = self.exact.kind
             if not (up.face.is_flat() and lo.face.is_flat()):
-                raise SceneError("the 'hertz' exact field is for the linearised geometry: both faces flat")
+                raise SceneError(f"the '{k}' exact field is for the linearised geometry: both faces flat")
             if self.gap is not None:
-                raise SceneError("with exact = 'hertz' the gap x^2/(2R) follows from exact.R; "
+                raise SceneError(f"with exact = '{k}' the gap follows from exact.R (and b); "
                                  "do not declare a separate gap")
             for body in self.bodies:
                 if body.material.E is None:
-                    raise SceneError("the 'hertz' exact field needs isotropic materials (E, nu)")
+                    raise SceneError(f"the '{k}' exact field needs isotropic materials (E, nu)")
         if self.exact is not None and self.exact.declared_for is None:  # declared for this scene
             object.__setattr__(self, "exact", replace(self.exact, declared_for=problem_entries(self)))
 
@@ -382,6 +390,9 @@ class Scene:
         if self.exact is not None and self.exact.kind == "hertz":
             from .profiles import Parabola
             return Parabola(R=self.exact.R, xc=self.exact.xc)
+        if self.exact is not None and self.exact.kind == "punch":
+            from .piecewise import Punch
+            return Punch(b=self.exact.b, R=self.exact.R, xc=self.exact.xc)
         return self.gap if self.gap is not None else Flat(0.0)
 
     def gap_at(self, x) -> np.ndarray:
@@ -442,7 +453,7 @@ def problem_entries(scene: Scene) -> tuple[tuple[str, object], ...]:
     ex = scene.exact
     if ex is not None:
         items += [("exact.kind", ex.kind), ("exact.stress", ex.stress), ("exact.R", ex.R), ("exact.load", ex.load),
-                  ("exact.xc", ex.xc), ("exact.any_material", ex.any_material)]
+                  ("exact.xc", ex.xc), ("exact.any_material", ex.any_material), ("exact.b", ex.b)]
     return tuple(items)
 
 
@@ -457,10 +468,10 @@ def follows_exact(scene: Scene) -> set[str]:
     isotropic = all(b.material.E is not None for b in scene.bodies)
     if ex is None or not isotropic:
         return set()
-    if ex.kind == "hertz":
+    if ex.kind in ("hertz", "punch"):
         own_loads = all(p.traction.kind == "exact" for b in scene.bodies for p in b.boundary if p.kind == "traction")
         if own_loads and not any(any(b.body_force) for b in scene.bodies):
-            return {"exact.R", "exact.load", "plane", *materials}
+            return {"exact.R", "exact.load", "exact.b", "plane", *materials}
         return set()
     return materials if ex.any_material else set()
 
@@ -474,6 +485,8 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
     def prof(p: Profile | None):
         if p is None:
             return None
+        if hasattr(p, "scaled"):  # a composite face: its nodes and centres
+            return p.scaled(length)
         return replace(p, **{f.name: getattr(p, f.name) * length for f in fields(p)})
 
     def mat(m: Material) -> Material:
@@ -503,6 +516,7 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
         ex = replace(ex, stress=None if ex.stress is None else tuple(v * stress for v in ex.stress),
                      R=None if ex.R is None else ex.R * length,
                      load=None if ex.load is None else ex.load * length * stress, xc=ex.xc * length,
+                     b=None if ex.b is None else ex.b * length,
                      declared_for=None if why is None else ((WHY, why),))
     fr = scene.friction
     if fr is not None:

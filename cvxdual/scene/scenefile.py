@@ -19,19 +19,20 @@ from pathlib import Path
 
 from ..errors import SceneError
 from ..validate import integer, number, pair, short, table, text
+from .geo import read_geo
 from .materials import Material
 from .outline import outline_from_dict
-from .profiles import profile_from_dict
+from .piecewise import profile_from_dict
 from .scene import WHY, Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene, Traction, problem_entries
 
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth", "outline",
-             "holes"}
+             "holes", "geo"}
 PART_KEYS = {"on", "kind", "traction", "interval"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
 CONTACT_KEYS = {"interval", "gap", "friction"}
 FRICTION_KEYS = {"kind", "g"}
-EXACT_KEYS = {"kind", "stress", "R", "load", "xc", "any_material"}
+EXACT_KEYS = {"kind", "stress", "R", "load", "xc", "any_material", "b"}
 MESH_KEYS = {"columns", "focus", "grading", "default_level"}
 TRACTION_KEYS = {"kind", "value"}
 
@@ -228,12 +229,13 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         data = builtin_data(str(source))
         name = f"built-in scene {str(source)!r}"
         seen = [f"built-in scene {str(source)!r}"]
-    data = copy.deepcopy(data)
+    data = _resolve_geo(copy.deepcopy(data), holder)
     chain = [name]
     files = [data]  # the raw tables of the chain, outermost first
     while "base" in data:
         ref = data.pop("base")
         base, holder, name = _base_data(ref, holder, name)
+        base = _resolve_geo(copy.deepcopy(base), holder)
         key = holder.resolve() if holder is not None else name
         chain.append(name)
         if key in seen:
@@ -258,6 +260,18 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
                                f"own ({e})"),)
         scene = replace(scene, exact=replace(scene.exact, declared_for=declared))
     return scene
+
+
+def _resolve_geo(data: dict, holder: Path | None) -> dict:
+    """``bodies.*.geo`` paths made relative to the directory of the file that holds them (the
+    working directory for a dict or an override)."""
+    bodies = data.get("bodies")
+    if isinstance(bodies, dict):
+        for b in bodies.values():
+            if isinstance(b, dict) and isinstance(b.get("geo"), str):
+                p = Path(b["geo"]).expanduser()
+                b["geo"] = str(p if p.is_absolute() or holder is None else holder.parent / p)
+    return data
 
 
 def _merged(files: list[dict]) -> dict:
@@ -300,7 +314,8 @@ def scene_from_dict(data: dict) -> Scene:
     if "exact" in data:
         e = _check_keys(data["exact"], EXACT_KEYS, "exact")
         exact = ExactSpec(kind=text(_need(e, "kind", "exact"), "exact.kind"), stress=e.get("stress"), R=e.get("R"),
-                          load=e.get("load"), xc=e.get("xc", 0.0), any_material=e.get("any_material", False))
+                          load=e.get("load"), xc=e.get("xc", 0.0), any_material=e.get("any_material", False),
+                          b=e.get("b"))
     m = _check_keys(data.get("mesh", {}), MESH_KEYS, "mesh")
     mesh = MeshSpec(columns=integer(m.get("columns", 8), "mesh.columns"), focus=m.get("focus"),
                     grading=number(m.get("grading", 1.0), "mesh.grading", 1.0),
@@ -343,12 +358,19 @@ def _body(name: str, d: dict, plane: str) -> Body:
         parts.append(BoundaryPart(on=_need(pd, "on", pw), kind=_need(pd, "kind", pw), traction=tr,
                                   interval=pd.get("interval"), name=pname))
     focus_depth = d.get("focus_depth")
-    face = profile_from_dict(_need(d, "face", where), f"{where}.face")
     outline = None
+    if "geo" in d:
+        clash = sorted({"x", "face", "outline", "holes"} & set(d))
+        if clash:
+            raise SceneError(f"{where}: give either geo (the body's whole boundary) or {', '.join(clash)}, not both")
+        face, x, outline = read_geo(text(d["geo"], f"{where}.geo"), _need(d, "position", where), where)
+        d = {**d, "x": x}
+    else:
+        face = profile_from_dict(_need(d, "face", where), f"{where}.face")
     if "outline" in d:
         x1 = pair(_need(d, "x", where), f"{where}.x")[1]
         outline = outline_from_dict(d["outline"], d.get("holes"), (x1, float(face.value(x1))), where)
-    elif "holes" in d:
+    elif "holes" in d and outline is None:
         raise SceneError(f"{where}: holes need an outline; give the body's outline too")
     return Body(name=name, position=_need(d, "position", where), x_range=_need(d, "x", where),
                 far=number(d["far"], f"{where}.far") if "far" in d or outline is None else None,
