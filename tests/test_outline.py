@@ -16,6 +16,7 @@ from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
 from cvxdual.geometry.boundary import supported
 from cvxdual.geometry.mesh import build_mesh
+from cvxdual.geometry.outline_mesh import forget_meshes
 from cvxdual.geometry.triangulation import discretize
 from cvxdual.scene import load_scene
 
@@ -171,6 +172,7 @@ def test_missing_gmsh_is_one_line(monkeypatch, patch_outline):
 
     monkeypatch.setattr(builtins, "__import__", broken)
     monkeypatch.delitem(sys.modules, "gmsh", raising=False)
+    forget_meshes()  # a kept mesh would need no gmsh
     with pytest.raises(MeshError, match="libGLU.*apt-get install libglu1-mesa"):
         build_mesh(patch_outline, 0)
     build_mesh(load_scene("patch"), 0)  # a column scene needs no gmsh
