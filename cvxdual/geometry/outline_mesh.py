@@ -300,14 +300,24 @@ def _virtual(gmsh, virtual, lookup, tris, allp) -> tuple[np.ndarray, np.ndarray]
 
 
 def _check_strip(body, chain: np.ndarray) -> None:
-    """The strip's inner chain must stay inside the body (gmsh would fail, or mesh across)."""
+    """No outline part may cross the strip's inner chain or lie inside the strip (between the
+    face and the chain): gmsh would fail, or mesh across the strip."""
     a0, a1 = chain[:-1].copy(), chain[1:].copy()
     a0[0] += 1e-6 * (a1[0] - a0[0])  # the chain's ends may lie on a side of the outline
     a1[-1] -= 1e-6 * (a1[-1] - a0[-1])
     scale = float(np.ptp(chain, axis=0).max())
+    tol = 1e-9 * scale  # parts that run along the strip's sides lie on its boundary, to rounding
+    x0, x1 = chain[0, 0], chain[-1, 0]
     for p in body.outline.parts:
-        pts = np.concatenate([s.sample() for s in p.segments])
-        if np.any(segments_meet(a0, a1, pts[:-1], pts[1:], 1e-12 * scale)):
+        pts = np.concatenate([s.sample(64) if s.is_arc else
+                              np.linspace(s.start, s.end, 65) for s in p.segments])
+        x, y = pts[:, 0], pts[:, 1]
+        band = (x > x0 + tol) & (x < x1 - tol)
+        xc = np.clip(x, x0, x1)
+        below_face = body.sign * (y - body.face.value(xc)) > tol  # on the body's side of the face
+        above_chain = body.sign * (np.interp(xc, chain[:, 0], chain[:, 1]) - y) > tol  # not past the chain
+        inside = band & below_face & above_chain
+        if np.any(segments_meet(a0, a1, pts[:-1], pts[1:], 1e-12 * scale)) or np.any(inside):
             raise MeshError(f"body {body.name!r}: the strip of columns along its face (one column spacing deep, "
                             f"{abs(chain[:, 1] - body.face.value(chain[:, 0])).max():.3g} at most here) meets the "
                             f"outline part {p.name!r}; raise the level (the strip thins with h) or move {p.name!r} "
