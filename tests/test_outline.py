@@ -219,6 +219,9 @@ MALFORMED = [
     ("hole keys", 'holes = [{name = "hole", center = [0.0, -10.0]}]\n', "give center and radius"),
     ("two-point polygon", 'holes = [{name = "slot", points = [[0.0, -10.0], [1.0, -10.0]]}]\n', "at least 3"),
     ("far disagrees", "far = -30.0\n", "but its outline reaches"),
+    ("too many parts", _outline(RIGHT, *(f'{{name = "b{i}", to = [{10 - 20 * (i + 1) / 300}, -20.0]}}'
+                                           for i in range(300)), LEFT), "more than 200"),
+    ("holes not a list", "holes = 3\n", "must be a list"),
     ("strip meets a hole", 'holes = [{name = "hole", center = [0.0, -0.8], radius = 0.5}]\n',
      "meets the outline part 'hole'"),
 ]

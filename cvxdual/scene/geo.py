@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import MeshError, SceneError
 from ..validate import short
-from .outline import Outline, Part, Segment
+from .outline import MAX_PARTS, Outline, Part, Segment
 from .profiles import Flat, LowerCircle, UpperCircle
 
 TOL = 1e-9  # relative to the body's size: ends typed to the same point meet
@@ -63,12 +63,17 @@ def read_geo(path: str | Path, position: str, where: str):
         named = _curves(gmsh, where)
     finally:
         gmsh.finalize()
-    return _outline(named, position, where, path.name)
+    return _outline(named, position, where)
 
 
 def _curves(gmsh, where: str) -> dict[str, list[Segment]]:
     """Every physical curve's segments, by name."""
     out: dict[str, list[Segment]] = {}
+    n = sum(len(gmsh.model.getEntitiesForPhysicalGroup(d, t)) for d, t in gmsh.model.getPhysicalGroups(1))
+    if n > MAX_PARTS:
+        raise SceneError(f"{where}.geo: {n} curves in physical groups, more than {MAX_PARTS}; draw the body with "
+                         "fewer, longer curves")
+    points = np.array([gmsh.model.getValue(0, t, [])[:2] for _, t in gmsh.model.getEntities(0)]).reshape(-1, 2)
     for dim, tag in gmsh.model.getPhysicalGroups(1):
         name = gmsh.model.getPhysicalName(dim, tag)
         if not name:
@@ -76,13 +81,13 @@ def _curves(gmsh, where: str) -> dict[str, list[Segment]]:
                              "Physical Curve(\"bottom\") = {...};")
         if name in out:
             raise SceneError(f"{where}.geo: physical curve {name!r} is named twice; give every part its own name")
-        out[name] = [_segment(gmsh, c, name, where) for c in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)]
+        out[name] = [_segment(gmsh, c, name, where, points) for c in gmsh.model.getEntitiesForPhysicalGroup(dim, tag)]
     if "face" not in out:
         raise SceneError(f"{where}.geo: no physical curve named 'face'; name the contact face Physical Curve(\"face\")")
     return out
 
 
-def _segment(gmsh, curve: int, name: str, where: str) -> Segment:
+def _segment(gmsh, curve: int, name: str, where: str, points: np.ndarray) -> Segment:
     kind = gmsh.model.getType(1, curve)
     ends = gmsh.model.getBoundary([(1, curve)], oriented=True)
     if len(ends) != 2:
@@ -95,9 +100,8 @@ def _segment(gmsh, curve: int, name: str, where: str) -> Segment:
         mid = gmsh.model.getValue(1, curve, [0.5 * (lo[0] + hi[0])])[:2]
         c = np.array(_center(np.array(a), np.array(mid), np.array(b)))
         # the file's own centre point where it has one: the fit through three points rounds
-        pts = [np.array(gmsh.model.getValue(0, t, [])[:2]) for _, t in gmsh.model.getEntities(0)]
-        near = [q for q in pts if np.linalg.norm(q - c) <= 1e-9 * (1.0 + np.linalg.norm(c))]
-        return Segment(a, b, tuple(map(float, near[0] if near else c)))
+        near = np.flatnonzero(np.linalg.norm(points - c, axis=1) <= 1e-9 * (1.0 + np.linalg.norm(c)))
+        return Segment(a, b, tuple(map(float, points[near[0]] if len(near) else c)))
     raise SceneError(f"{where}.geo: part {name!r} is a {kind} curve (a spline?); outlines take lines and circle "
                      "arcs: draw it with those")
 
@@ -110,7 +114,7 @@ def _center(a, m, b) -> tuple[float, float]:
             float((sa * (b[0] - m[0]) + sm * (a[0] - b[0]) + sb * (m[0] - a[0])) / d))
 
 
-def _outline(named: dict[str, list[Segment]], position: str, where: str, file: str):
+def _outline(named: dict[str, list[Segment]], position: str, where: str):
     face = named.pop("face")
     if len(face) != 1:
         raise SceneError(f"{where}.geo: the face is {len(face)} curves; draw it as one line or one arc")

@@ -29,6 +29,7 @@ from ..validate import number, pair, short, text
 ARC_SAMPLES = 64  # points per arc when checking crossings and drawing (a chord error of 1e-4 of the radius)
 FACE_SAMPLES = 2001  # points of the face in the crossing checks
 PART_KINDS = ("line", "arc")
+MAX_PARTS = 200  # parts and holes of one body: the crossing check is quadratic in the sampled segments
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,10 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
     if not isinstance(path, list) or not path:
         raise SceneError(f"{where}.outline must be a non-empty list of parts, e.g. "
                          "[{name = \"bottom\", to = [x, y]}, ...], got " + short(path))
+    n_parts = len(path) + (len(holes) if isinstance(holes, list) else 0)
+    if n_parts > MAX_PARTS:
+        raise SceneError(f"{where}: {n_parts} outline parts and holes, more than {MAX_PARTS}; draw the body with "
+                         "fewer, longer parts")
     parts, cur = [], start
     for i, d in enumerate(path):
         w = f"{where}.outline[{i}]"
@@ -273,6 +278,10 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
 
 
 def _check_crossings(chains, tol, body) -> None:
+    """No two segments of the sampled outline meet, but neighbours at their shared end. Blocks of
+    rows against all segments keep the memory at ``block x n``; only the meeting pairs are kept."""
+    from scipy.spatial import cKDTree
+
     segs, owner, idx = [], [], []
     for k, (pts, name) in enumerate(chains):
         segs.append(np.stack([pts[:-1], pts[1:]], 1))
@@ -281,27 +290,26 @@ def _check_crossings(chains, tol, body) -> None:
     S = np.concatenate(segs)
     chain = np.concatenate(idx)
     pos = np.concatenate([np.arange(len(s)) for s in segs])
-    n = len(S)
-    hit = np.zeros((n, n), bool)
-    block = 512  # rows per block: (512 x n) pairs at a time keep the memory flat
+    # chain ends that coincide (a part's end and the next part's start): their end segments may touch
+    first = np.cumsum([0] + [len(s) for s in segs[:-1]])
+    last = first + np.array([len(s) for s in segs]) - 1
+    end_pts = np.concatenate([[c[0] for c, _ in chains], [c[-1] for c, _ in chains]])
+    end_seg = np.concatenate([first, last])
+    shared = np.array(sorted(cKDTree(end_pts).query_pairs(tol)), int).reshape(-1, 2)
+    ok_a, ok_b = end_seg[shared[:, 0]], end_seg[shared[:, 1]]
+    ok = set(zip(np.minimum(ok_a, ok_b).tolist(), np.maximum(ok_a, ok_b).tolist(), strict=True))
+    n, block = len(S), 512
     for i in range(0, n, block):
-        hit[i:i + block] = segments_meet(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
-    # neighbours share an end: consecutive samples of one chain, and chain ends that meet
-    ends = [(c[0], c[-1]) for c, _ in chains]
-    first = np.array([np.flatnonzero(chain == k)[0] for k in range(len(chains))])
-    last = np.array([np.flatnonzero(chain == k)[-1] for k in range(len(chains))])
-    same_chain = (chain[:, None] == chain[None]) & (np.abs(pos[:, None] - pos[None]) <= 1)
-    hit &= ~same_chain
-    for a in range(len(chains)):
-        for b in range(len(chains)):
-            for ia, pa in ((first[a], ends[a][0]), (last[a], ends[a][1])):
-                for ib, pb in ((first[b], ends[b][0]), (last[b], ends[b][1])):
-                    if a != b and math.dist(pa, pb) <= tol:
-                        hit[ia, ib] = hit[ib, ia] = False
-    i, j = np.nonzero(np.triu(hit, 1))
-    if len(i):
-        a, b = owner[i[0]], owner[j[0]]
-        where = S[i[0]].mean(0)
-        what = f"part {a!r} crosses itself" if a == b else f"parts {a!r} and {b!r} cross or touch"
-        raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
-                         f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")
+        hit = segments_meet(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
+        r = np.arange(i, min(i + block, n))[:, None]
+        hit &= np.arange(n)[None, :] > r  # each pair once
+        hit &= ~((chain[r] == chain[None, :]) & (np.abs(pos[r] - pos[None, :]) <= 1))  # samples of one part
+        for u, v in zip(*np.nonzero(hit), strict=True):
+            a, b = int(r[u, 0]), int(v)
+            if (a, b) in ok:
+                continue
+            what = (f"part {owner[a]!r} crosses itself" if owner[a] == owner[b] else
+                    f"parts {owner[a]!r} and {owner[b]!r} cross or touch")
+            where = S[a].mean(0)
+            raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
+                             f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")

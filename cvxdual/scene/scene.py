@@ -111,13 +111,10 @@ class Body:
             raise SceneError(f"body {short(self.name)}: x range must have x0 < x1, got {short(self.x_range)}")
         object.__setattr__(self, "x_range", (x0, x1))
         object.__setattr__(self, "body_force", pair(self.body_force, f"body {short(self.name)} body_force"))
-        if self.outline is not None:
-            self._check_outline(x0, x1)
-        far = number(self.far, f"body {short(self.name)}: far")
-        object.__setattr__(self, "far", far)
         integer(self.layers, f"body {short(self.name)}: layers", minimum=1)
         if not isinstance(self.face, Profile):
-            raise SceneError(f"body {short(self.name)}: face must be a profile (flat, parabola, circle, cosine)")
+            raise SceneError(f"body {short(self.name)}: face must be a profile (flat, parabola, circle, cosine, "
+                             "punch, composite)")
         if not isinstance(self.material, Material):
             raise SceneError(f"body {short(self.name)}: material must be a cvxdual.Material")
         lo, hi = self.face.domain()
@@ -125,6 +122,10 @@ class Body:
             raise SceneError(f"body {short(self.name)}: its face ({self.face.kind}) is a graph only on "
                              f"[{lo:g}, {hi:g}], not on the body's x range [{x0:g}, {x1:g}]; "
                              "shrink the body or enlarge the arc")
+        if self.outline is not None:
+            self._check_outline(x0, x1)
+        far = number(self.far, f"body {short(self.name)}: far")
+        object.__setattr__(self, "far", far)
         # The far side must not touch the face: sample the face densely (the closed set of
         # profile kinds has at most a few oscillations per wavelength, resolved by 4001 points).
         n_infl = self.face.count_inflexions(x0, x1)
@@ -254,8 +255,8 @@ class ExactSpec:
                 raise SceneError("exact field 'hertz' has no b (a flat's half-width): use kind = 'punch'")
             for name in ("R", "load"):
                 v = getattr(self, name)
-                if v is None or number(v, f"exact field 'hertz' {name}", "positive") <= 0:
-                    raise SceneError(f"exact field 'hertz' needs a positive finite {name}, got {v!r}")
+                if v is None or number(v, f"exact field '{self.kind}' {name}", "positive") <= 0:
+                    raise SceneError(f"exact field '{self.kind}' needs a positive finite {name}, got {v!r}")
                 object.__setattr__(self, name, float(v))
         else:
             raise SceneError(f"exact field kind must be 'uniform', 'hertz' or 'punch', got {short(self.kind)}")
