@@ -378,8 +378,8 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
         reasons.append("v does not vanish on the supports")
     polygonal = space.mesh.polygonal_parts()
     if polygonal:
-        reasons.append(f"curved parts {', '.join(polygonal)} are supported or loaded and meshed as polygons: the "
-                       "bounds hold for the polygonal body")
+        reasons.append(f"curved parts {', '.join(polygonal)} (supported or loaded arcs, or splines) are meshed as "
+                       "polygons: the bounds hold for the polygonal body")
     _, weight, body = space.mesh.continuation()
     if len(weight) and any(any(space.scene.bodies[k].body_force) for k in np.unique(body)):
         reasons.append("body force beyond the free arcs' polygons is not in L(v)")

@@ -266,13 +266,14 @@ class Mesh:
 
     def polygonal_parts(self) -> list[str]:
         """``body.part`` names of the curved outline parts meshed as polygons (supported or loaded
-        arcs: the mesh's domain is not the body's there)."""
+        arcs, and splines: the mesh's domain is not the body's there)."""
         out = []
         for bm in self.bodies:
             if bm.rest is None:
                 continue
             held = held_parts(bm.body)
-            out += [f"{bm.body.name}.{p.name}" for p in bm.body.outline.parts if p.is_curved and p.name in held]
+            out += [f"{bm.body.name}.{p.name}" for p in bm.body.outline.parts
+                    if p.has_spline or (p.is_curved and p.name in held)]
         return out
 
 

@@ -19,18 +19,19 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
 
 from ..errors import MeshError
 from ..scene.geo import import_gmsh
-from ..scene.outline import Segment, segments_meet
+from ..scene.outline import segments_meet
 
 GROWTH = 0.4  # element size grows by 0.4 times the distance from the strip (a mild grading)
 STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells
 ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level)
+SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
 
@@ -180,23 +181,31 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     part_curves: dict[str, list[int]] = {}
     path = [(p.name, s) for p in body.outline.path for s in p.segments]
     # the path's ends are the face's ends exactly (the outline check allows rounding)
-    path[0] = (path[0][0], Segment(ends["right"], path[0][1].end, path[0][1].center))
-    path[-1] = (path[-1][0], Segment(path[-1][1].start, ends["left"], path[-1][1].center))
+    path[0] = (path[0][0], replace(path[0][1], start=ends["right"]))
+    path[-1] = (path[-1][0], replace(path[-1][1], end=ends["left"]))
     first_name, first = path[0]
     last_name, last = path[-1]
     start_pt = chain_pts[-1]
     if _continues_side(first, ends["right"], chain[-1], body.sign):
-        path[0] = (first_name, Segment(tuple(chain[-1]), first.end, first.center))
+        path[0] = (first_name, replace(first, start=tuple(chain[-1])))
         part_curves[first_name] = [("strip", nc - 1)]
     else:
         loop.append(line(start_pt, point(ends["right"], w[-1]), keep=True))
     trim_last = _continues_side(last, ends["left"], chain[0], body.sign, at_end=True)
     if trim_last:
-        path[-1] = (last_name, Segment(last.start, tuple(chain[0]), last.center))
+        path[-1] = (last_name, replace(last, end=tuple(chain[0])))
     loaded = held_parts(body)
     virtual: list[tuple] = []  # (kind, node geometry points, weight) of each free arc's pieces
 
     def curve(name, s, concave) -> list[int]:
+        if s.is_spline:  # a polygon through points of the spline, as fine as the sizes there
+            pts = s.sample(SPLINE_SAMPLES)
+            arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+            n = max(1, math.ceil(arc[-1] / float(field.at(pts).min())))  # equal stretches no longer than the size
+            keep = np.unique(np.searchsorted(arc, arc[-1] * np.arange(1, n) / n))
+            pts = np.concatenate([pts[:1], pts[keep[(keep > 0) & (keep < len(pts) - 1)]], pts[-1:]])
+            ids = [point(q) for q in pts]
+            return [line(ids[j], ids[j + 1]) for j in range(len(ids) - 1)]
         if not s.is_arc:
             return [line(point(s.start), point(s.end))]
         if name in loaded:  # a supported or loaded arc: gmsh's polygon of it (not certified)

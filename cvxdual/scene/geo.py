@@ -21,6 +21,7 @@ from .outline import MAX_PARTS, Outline, Part, Segment
 from .profiles import Flat, LowerCircle, UpperCircle
 
 TOL = 1e-9  # relative to the body's size: ends typed to the same point meet
+GEO_SPLINE_POINTS = 31  # inner points of gmsh's spline the outline's spline passes through
 
 # the system libraries gmsh's wheel links, and the Debian/Ubuntu packages that provide them
 SYSTEM_PACKAGES = {"libGLU": "libglu1-mesa", "libXcursor": "libxcursor1", "libXft": "libxft2",
@@ -102,8 +103,12 @@ def _segment(gmsh, curve: int, name: str, where: str, points: np.ndarray) -> Seg
         # the file's own centre point where it has one: the fit through three points rounds
         near = np.flatnonzero(np.linalg.norm(points - c, axis=1) <= 1e-9 * (1.0 + np.linalg.norm(c)))
         return Segment(a, b, tuple(map(float, points[near[0]] if len(near) else c)))
-    raise SceneError(f"{where}.geo: part {name!r} is a {kind} curve (a spline?); outlines take lines and circle "
-                     "arcs: draw it with those")
+    if kind in ("BSpline", "Bezier", "Nurb", "Spline"):  # a spline through points of gmsh's curve
+        lo, hi = gmsh.model.getParametrizationBounds(1, curve)
+        t = np.linspace(lo[0], hi[0], GEO_SPLINE_POINTS + 2)[1:-1]
+        xyz = np.asarray(gmsh.model.getValue(1, curve, list(t))).reshape(-1, 3)
+        return Segment(a, b, through=tuple(map(tuple, xyz[:, :2].tolist())))
+    raise SceneError(f"{where}.geo: part {name!r} is a {kind} curve; outlines take lines, circle arcs and splines")
 
 
 def _center(a, m, b) -> tuple[float, float]:
@@ -153,7 +158,7 @@ def _outline(named: dict[str, list[Segment]], position: str, where: str):
         ring = [s for _, s in loop]
         pts = np.array([s.start for s in ring])
         if np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]) < 0:
-            ring = [Segment(s.end, s.start, s.center) for s in reversed(ring)]  # holes run counter-clockwise
+            ring = [s.reversed() for s in reversed(ring)]  # holes run counter-clockwise
         holes.append(Part(names.pop(), tuple(ring)))
     parts: list[Part] = []
     for name, s in path:  # consecutive segments of one name are one part only in holes: here one each
@@ -187,7 +192,7 @@ def _chain(segs, start, end, tol, where, first=None) -> list[tuple[int, str, Seg
             if math.dist(s.start, cur) <= tol:
                 nxt = (k, n, s)
             elif math.dist(s.end, cur) <= tol:
-                nxt = (k, n, Segment(s.end, s.start, s.center))
+                nxt = (k, n, s.reversed())
             if nxt is not None:
                 del pool[k]
                 break

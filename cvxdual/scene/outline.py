@@ -28,26 +28,35 @@ from ..validate import number, pair, short, text
 
 ARC_SAMPLES = 64  # points per arc when checking crossings and drawing (a chord error of 1e-4 of the radius)
 FACE_SAMPLES = 2001  # points of the face in the crossing checks
-PART_KINDS = ("line", "arc")
+PART_KINDS = ("line", "arc", "spline")
 MAX_PARTS = 200  # parts and holes of one body: the crossing check is quadratic in the sampled segments
 
 
 @dataclass(frozen=True)
 class Segment:
-    """A line from ``start`` to ``end``, or a circular arc from ``start`` to ``end`` about
-    ``center`` (the shorter way round: less than a half turn)."""
+    """A line from ``start`` to ``end``; a circular arc from ``start`` to ``end`` about
+    ``center`` (the shorter way round: less than a half turn); or a spline from ``start``
+    ``through`` points to ``end``: the natural cubic spline of ``x`` and ``y`` in the chord length."""
 
     start: tuple[float, float]
     end: tuple[float, float]
     center: tuple[float, float] | None = None
+    through: tuple[tuple[float, float], ...] | None = None
 
     @property
     def is_arc(self) -> bool:
         return self.center is not None
 
+    @property
+    def is_spline(self) -> bool:
+        return self.through is not None
+
     def sample(self, n: int = ARC_SAMPLES) -> np.ndarray:
-        """``(n + 1, 2)`` points from start to end (``2`` points for a line)."""
+        """``(n + 1, 2)`` points from start to end (``2`` points for a line; ``n`` per stretch
+        between given points for a spline)."""
         p0, p1 = np.array(self.start), np.array(self.end)
+        if self.is_spline:
+            return self._spline(n)
         if not self.is_arc:
             return np.stack([p0, p1])
         c = np.array(self.center)
@@ -66,9 +75,25 @@ class Segment:
         sweep = math.atan2(d0[0] * d1[1] - d0[1] * d1[0], float(d0 @ d1))
         return a0, sweep
 
+    def reversed(self) -> Segment:
+        """The same curve from ``end`` to ``start``."""
+        return Segment(self.end, self.start, self.center, None if self.through is None else self.through[::-1])
+
+    def _spline(self, n: int) -> np.ndarray:
+        from scipy.interpolate import CubicSpline
+
+        knots = np.array([self.start, *self.through, self.end], float)
+        t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(knots, axis=0), axis=1))])
+        s = np.concatenate([np.linspace(t[k], t[k + 1], n + 1)[:-1] for k in range(len(t) - 1)] + [t[-1:]])
+        pts = CubicSpline(t, knots, bc_type="natural")(s)
+        pts[0], pts[-1] = knots[0], knots[-1]
+        return pts
+
     @property
     def length(self) -> float:
         p0, p1 = np.array(self.start), np.array(self.end)
+        if self.is_spline:
+            return float(np.linalg.norm(np.diff(self.sample(), axis=0), axis=1).sum())
         if not self.is_arc:
             return float(np.linalg.norm(p1 - p0))
         return abs(self.angles()[1]) * float(np.linalg.norm(p0 - np.array(self.center)))
@@ -76,7 +101,7 @@ class Segment:
     @property
     def axis(self) -> str | None:
         """``"x"`` for a horizontal line, ``"y"`` for a vertical one, else ``None``."""
-        if self.is_arc:
+        if self.is_arc or self.is_spline:
             return None
         dx, dy = abs(self.end[0] - self.start[0]), abs(self.end[1] - self.start[1])
         tol = 1e-12 * (dx + dy)  # a line typed axis-aligned: its two coordinates agree to rounding
@@ -92,7 +117,11 @@ class Part:
 
     @property
     def is_curved(self) -> bool:
-        return any(s.is_arc for s in self.segments)
+        return any(s.is_arc or s.is_spline for s in self.segments)
+
+    @property
+    def has_spline(self) -> bool:
+        return any(s.is_spline for s in self.segments)
 
 
 @dataclass(frozen=True)
@@ -126,7 +155,8 @@ class Outline:
         def seg(s: Segment) -> Segment:
             def sc(q):
                 return None if q is None else (q[0] * length, q[1] * length)
-            return Segment(sc(s.start), sc(s.end), sc(s.center))
+            through = None if s.through is None else tuple(map(sc, s.through))
+            return Segment(sc(s.start), sc(s.end), sc(s.center), through)
         return Outline(tuple(Part(p.name, tuple(map(seg, p.segments))) for p in self.path),
                        tuple(Part(p.name, tuple(map(seg, p.segments))) for p in self.holes))
 
@@ -151,14 +181,23 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
         w = f"{where}.outline[{i}]"
         if not isinstance(d, dict):
             raise SceneError(f"{w} must be a table {{name, to}} or {{name, to, center}}, got {short(d)}")
-        extra = set(d) - {"name", "to", "center"}
+        extra = set(d) - {"name", "to", "center", "through"}
         if extra:
-            raise SceneError(f"{w}: unknown key {sorted(extra)[0]!r}; a part has name, to and (for an arc) center")
+            raise SceneError(f"{w}: unknown key {sorted(extra)[0]!r}; a part has name, to and (for an arc) center or "
+                             "(for a spline) through")
+        if "center" in d and "through" in d:
+            raise SceneError(f"{w}: give center (an arc) or through (a spline), not both")
         if "name" not in d or "to" not in d:
             raise SceneError(f"{w}: missing key {'name' if 'name' not in d else 'to'!r}")
         end = _point(d["to"], f"{w}.to")
         center = None if "center" not in d else _point(d["center"], f"{w}.center")
-        parts.append(Part(text(d["name"], f"{w}.name"), (Segment(cur, end, center),)))
+        through = None
+        if "through" in d:
+            if not isinstance(d["through"], list) or not d["through"] or len(d["through"]) > MAX_PARTS:
+                raise SceneError(f"{w}.through must list 1 to {MAX_PARTS} points [[x, y], ...], got "
+                                 f"{short(d['through'])}")
+            through = tuple(_point(q, f"{w}.through[{j}]") for j, q in enumerate(d["through"]))
+        parts.append(Part(text(d["name"], f"{w}.name"), (Segment(cur, end, center, through),)))
         cur = end
     if holes is None:
         holes = []
