@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -88,11 +88,15 @@ class SizeField:
                     size.append(np.full(len(q), arc_size(seg, level)))
         return cls(np.concatenate(src), np.concatenate(size), 2.0 * float(np.diff(columns).max()))
 
-    def at(self, pts: np.ndarray) -> np.ndarray:
+    @cached_property
+    def _tree(self):
         from scipy.spatial import cKDTree
 
+        return cKDTree(self.points)
+
+    def at(self, pts: np.ndarray) -> np.ndarray:
         k = min(NEAREST, len(self.points))
-        d, i = cKDTree(self.points).query(pts, k=k)
+        d, i = self._tree.query(pts, k=k)
         d, i = d.reshape(len(pts), k), i.reshape(len(pts), k)
         s = self.sizes[i]
         return np.minimum(self.cap, np.min(s + GROWTH * np.maximum(d - s, 0.0), axis=1))
