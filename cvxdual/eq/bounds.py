@@ -250,8 +250,13 @@ def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.
 
 def strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
     """Engineering strains ``(e11, e22, 2 e12)`` ``(n_T, 3)`` of a P1 displacement ``v (n_nodes, 2)``."""
-    g, _ = bary_gradients(space.X)  # (n_T, 3, 2)
-    vt = v[space.tri]  # (n_T, 3, 2)
+    return p1_strains(space.X, v[space.tri])
+
+
+def p1_strains(X: np.ndarray, vt: np.ndarray) -> np.ndarray:
+    """Engineering strains ``(m, 3)`` of the linear interpolants of vertex values ``vt (m, 3, 2)`` on
+    triangles ``X (m, 3, 2)``."""
+    g, _ = bary_gradients(X)  # (m, 3, 2)
     du = np.einsum("tai,taj->tij", vt, g)  # du_i/dx_j
     return np.stack([du[:, 0, 0], du[:, 1, 1], du[:, 0, 1] + du[:, 1, 0]], 1)
 
@@ -299,9 +304,7 @@ def primal_energy(space: EquilibriumSpace, v: np.ndarray) -> float:
     nodes, weight, body = space.mesh.continuation()
     beyond = 0.0
     if len(weight):
-        g, _ = bary_gradients(space.mesh.points[nodes])
-        du = np.einsum("tai,taj->tij", v[nodes], g)
-        ec = np.stack([du[:, 0, 0], du[:, 1, 1], du[:, 0, 1] + du[:, 1, 0]], 1)
+        ec = p1_strains(space.mesh.points[nodes], v[nodes])
         beyond = float(np.sum(weight * np.einsum("ti,tij,tj->t", ec, stiff[body], ec)))
     return 0.5 * (straight + curved + beyond) - load_work(space, v)
 

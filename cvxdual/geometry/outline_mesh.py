@@ -199,7 +199,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     if trim_last:
         path[-1] = (last_name, replace(last, end=tuple(chain[0])))
     loaded = held_parts(body)
-    virtual: list[tuple] = []  # (kind, node geometry points, weight) of each free arc's pieces
+    virtual = {"corner": [], "segment": [], "segment_area": []}  # the free arcs' pieces (_free_arc)
 
     def curve(name, s, concave) -> list[int]:
         if s.is_spline:  # a polygon through points of the spline, as fine as the sizes there
@@ -280,36 +280,29 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         parts[name] = np.asarray(chainp)
     if np.any(tris < 0) or not len(tris):
         raise MeshError(f"gmsh gave no usable mesh of body {body.name!r}")  # pragma: no cover - gmsh contract
-    vn, vw = _virtual(gmsh, virtual, lookup, tris, allp)
+    vn, vw = _virtual(virtual, xy, idx, tris, allp)
     return RestMesh(points=pts, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
 
 
-def _virtual(gmsh, virtual, lookup, tris, allp) -> tuple[np.ndarray, np.ndarray]:
-    """Node triples and area weights of the free arcs' continuation pieces (:func:`_free_arc`)."""
-    if not virtual:
+def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
+    """Node triples and area weights of the free arcs' continuation pieces (:func:`_free_arc`):
+    their points found among gmsh's nodes ``xy`` (local indices ``idx``) by their coordinates."""
+    corner = np.asarray(virtual["corner"], float).reshape(-1, 3, 2)
+    chord = np.asarray(virtual["segment"], float).reshape(-1, 2, 2)
+    if not len(corner) + len(chord):
         return np.zeros((0, 3), int), np.zeros(0)
-
-    def node(ptag) -> int:
-        return int(lookup[int(gmsh.model.mesh.getNodes(0, ptag)[0][0])])
-
+    c_nodes = idx[_match_rows(corner.reshape(-1, 2), xy)].reshape(-1, 3)
+    p = allp[c_nodes]
+    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    c_area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    # the triangle on each chord: its edge key among all the triangles' edges
     n = int(tris.max()) + 1
-    e = np.stack([tris, np.roll(tris, -1, axis=1)], -1).reshape(-1, 2)
-    keys = np.sort(e, axis=1) @ np.array([n, 1])
+    keys = np.sort(np.stack([tris, np.roll(tris, -1, axis=1)], -1).reshape(-1, 2), axis=1) @ np.array([n, 1])
     order = np.argsort(keys)
-    nodes, weight = [], []
-    for kind, pts, w in virtual:
-        if kind == "corner":
-            tri = [node(p) for p in pts]
-            p = allp[tri]
-            d1, d2 = p[1] - p[0], p[2] - p[0]
-            nodes.append(tri)
-            weight.append(0.5 * abs(d1[0] * d2[1] - d1[1] * d2[0]))
-        else:
-            a, b = sorted(node(p) for p in pts)
-            t = order[np.searchsorted(keys[order], a * n + b)] // 3
-            nodes.append([int(v) for v in tris[t]])
-            weight.append(w)
-    return np.asarray(nodes, int), np.asarray(weight, float)
+    ends = np.sort(idx[_match_rows(chord.reshape(-1, 2), xy)].reshape(-1, 2), axis=1)
+    t = order[np.searchsorted(keys[order], ends @ np.array([n, 1]))] // 3
+    return (np.concatenate([c_nodes, tris[t]]).astype(int),
+            np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
 
 
 def _check_strip(body, chain: np.ndarray) -> None:
@@ -358,8 +351,8 @@ def _free_arc(s, concave, level, point, line, virtual) -> list[int]:
     a convex arc, or, round a concave one (a hole), the tangents at the chords' ends. The pieces of
     the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
     displacement continues there as a P1 function, recorded in ``virtual`` for the energy bound:
-    the adjacent triangle's polynomial on a segment (kind ``"segment"``: the chord's ends and the
-    segment's area), or the interpolant on the triangle of a corner (kind ``"corner"``)."""
+    the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
+    ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``)."""
     a0, sweep = s.angles()
     r = math.dist(s.start, s.center)
     n = max(1, math.ceil(abs(sweep) / (math.pi / 2) * ARC_EDGES * 2**level - 1e-9))
@@ -375,14 +368,16 @@ def _free_arc(s, concave, level, point, line, virtual) -> list[int]:
         seg_area = 0.5 * r * r * (abs(d) - math.sin(abs(d)))
         for j in range(n):
             curves.append(line(ids[j], ids[j + 1], keep=True))
-            virtual.append(("segment", (ids[j], ids[j + 1]), seg_area))
+            virtual["segment"].append((on[j], on[j + 1]))
+            virtual["segment_area"].append(seg_area)
         return curves
     rv = r / math.cos(0.5 * d)
     for j in range(n):
         q = t[j] + 0.5 * d
-        v = point(tuple(c + rv * np.array([math.cos(q), math.sin(q)])), lc)
+        corner = tuple(c + rv * np.array([math.cos(q), math.sin(q)]))
+        v = point(corner, lc)
         curves += [line(ids[j], v, keep=True), line(v, ids[j + 1], keep=True)]
-        virtual.append(("corner", (ids[j], v, ids[j + 1]), None))
+        virtual["corner"].append((on[j], corner, on[j + 1]))
     return curves
 
 

@@ -40,6 +40,11 @@ class HertzField:
     hertz: HertzData
     xc: float
     y_face: float
+    label = "Hertz"
+
+    @property
+    def half_width(self) -> float:
+        return self.hertz.a
 
     def stress(self, body: int, pts: np.ndarray) -> np.ndarray:
         return body_stress(pts[:, 0], pts[:, 1], self.hertz.a, self.hertz.p0,
@@ -60,6 +65,7 @@ class PunchField:
     punch: PunchData
     xc: float
     y_face: float
+    label = "punch"
 
     @property
     def half_width(self) -> float:
@@ -100,10 +106,6 @@ def exact_field(scene: Scene):
     return HertzField(data, spec.xc, up.face.y0)
 
 
-def spec_name(field) -> str:
-    return "Hertz" if isinstance(field, HertzField) else "punch"
-
-
 def exact_reference(scene: Scene):
     """``(field, None)``: the exact field to measure ``scene``'s solutions against, or
     ``(None, why)`` when the scene declares a field that does not solve it (it was declared for
@@ -117,12 +119,11 @@ def exact_reference(scene: Scene):
         # the closed form presses the faces together on [xc - a, xc + a]; where that lies on both
         # bodies, it must be free to touch (a is computed from the loads, which may have changed)
         lo, hi = max(b.x_range[0] for b in scene.bodies), min(b.x_range[1] for b in scene.bodies)
-        half = field.hertz.a if isinstance(field, HertzField) else field.punch.a
-        z0, z1 = max(field.xc - half, lo), min(field.xc + half, hi)
+        z0, z1 = max(field.xc - field.half_width, lo), min(field.xc + field.half_width, hi)
         a, b = scene.contact
         tol = 1e-9 * (hi - lo)
         if z0 < z1 and (z0 < a - tol or z1 > b + tol):
-            return None, (f"the {spec_name(field)} contact zone [{z0:.4g}, {z1:.4g}] reaches out of the candidate "
+            return None, (f"the {field.label} contact zone [{z0:.4g}, {z1:.4g}] reaches out of the candidate "
                           "contact interval "
                           f"[{a:.4g}, {b:.4g}], so the exact field does not solve this problem")
     return field, None

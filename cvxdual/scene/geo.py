@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import MeshError, SceneError
 from ..validate import short
-from .outline import MAX_PARTS, Outline, Part, Segment
+from .outline import MAX_PARTS, Outline, Part, Segment, signed_area
 from .profiles import Flat, LowerCircle, UpperCircle
 
 TOL = 1e-9  # relative to the body's size: ends typed to the same point meet
@@ -156,8 +156,7 @@ def _outline(named: dict[str, list[Segment]], position: str, where: str):
         if len(names) != 1:
             raise SceneError(f"{where}.geo: a hole is drawn by parts {sorted(names)}; name a hole's curves alike")
         ring = [s for _, s in loop]
-        pts = np.array([s.start for s in ring])
-        if np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]) < 0:
+        if signed_area(np.array([s.start for s in ring])) < 0:
             ring = [s.reversed() for s in reversed(ring)]  # holes run counter-clockwise
         holes.append(Part(names.pop(), tuple(ring)))
     parts: list[Part] = []

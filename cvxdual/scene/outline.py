@@ -218,14 +218,18 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
             if not isinstance(pts, list) or len(pts) < 3:
                 raise SceneError(f"{w}.points must list at least 3 corners, got {short(pts)}")
             p = [_point(q, f"{w}.points[{j}]") for j, q in enumerate(pts)]
-            q = np.array(p)
-            if np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1]) < 0:
+            if signed_area(np.array(p)) < 0:
                 p = p[::-1]  # holes run counter-clockwise (the body on their right)
             hs.append(Part(name, tuple(Segment(p[j], p[(j + 1) % len(p)]) for j in range(len(p)))))
         else:
             raise SceneError(f"{w}: give center and radius (a circle) or points (a polygon), got keys "
                              f"{sorted(keys)}")
     return Outline(tuple(parts), tuple(hs))
+
+
+def signed_area(pts: np.ndarray) -> float:
+    """The area of the closed polygon through ``pts`` ``(m, 2)``: positive counter-clockwise."""
+    return 0.5 * float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]))
 
 
 def circle(name: str, center, radius: float) -> Part:
@@ -302,7 +306,7 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
     _check_crossings(_loop_polyline(face_pts, outline), tol, body)
     # area sign of the closed path (face left-to-right, then the path): lower bodies run clockwise
     ring = np.concatenate([face_pts] + [s.sample()[1:] for p in outline.path for s in p.segments])
-    area = 0.5 * np.sum(ring[:-1, 0] * ring[1:, 1] - ring[1:, 0] * ring[:-1, 1])
+    area = signed_area(ring)
     if (area > 0) != (position == "upper") or abs(area) <= tol * scale:
         side = "above" if position == "upper" else "below"
         raise SceneError(f"body {short(body)}: the outline does not enclose a region {side} the face (a {position} "

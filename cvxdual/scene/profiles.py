@@ -18,7 +18,7 @@ kind           curve
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import ClassVar
 
 import numpy as np
@@ -78,6 +78,10 @@ class Profile:
 
     def is_flat(self) -> bool:
         return False
+
+    def scaled(self, length: float) -> Profile:
+        """The same curve in units ``length`` times smaller (every parameter is a length)."""
+        return replace(self, **{f.name: getattr(self, f.name) * length for f in fields(self)})
 
 
 @dataclass(frozen=True)

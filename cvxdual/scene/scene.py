@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -484,11 +484,7 @@ def convert_units(scene: Scene, length: float, stress: float, units: tuple[str, 
     from .materials import Material
 
     def prof(p: Profile | None):
-        if p is None:
-            return None
-        if hasattr(p, "scaled"):  # a composite face: its nodes and centres
-            return p.scaled(length)
-        return replace(p, **{f.name: getattr(p, f.name) * length for f in fields(p)})
+        return None if p is None else p.scaled(length)
 
     def mat(m: Material) -> Material:
         return Material(C=tuple(tuple(v * stress for v in row) for row in m.C),
