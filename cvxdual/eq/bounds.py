@@ -300,13 +300,19 @@ def primal_energy(space: EquilibriumSpace, v: np.ndarray) -> float:
     slabs = space.pieces.slabs
     curved = float(np.sum(space.pieces.slab_areas() * np.einsum("si,sij,sj->s", es, stiff[slabs.body], es)))
     straight = float(np.sum(area * np.einsum("ti,tij,tj->t", e, stiff[space.body], e)))
-    # beyond free arcs the body is not meshed: v continues as a P1 function whose energy counts
+    return 0.5 * (straight + curved) + float(continuation_energy(space, v).sum()) - load_work(space, v)
+
+
+def continuation_energy(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
+    """``1/2 a(v, v)`` on each piece of the bodies beyond the mesh (free arcs,
+    :meth:`~cvxdual.geometry.mesh.Mesh.continuation`), where ``v`` continues as a P1 function and
+    the stress is zero: its share of ``J(v)``, and of ``G`` (``sigma - C e(v) = -C e(v)`` there)."""
     nodes, weight, body = space.mesh.continuation()
-    beyond = 0.0
-    if len(weight):
-        ec = p1_strains(space.mesh.points[nodes], v[nodes])
-        beyond = float(np.sum(weight * np.einsum("ti,tij,tj->t", ec, stiff[body], ec)))
-    return 0.5 * (straight + curved + beyond) - load_work(space, v)
+    if not len(weight):
+        return np.zeros(0)
+    stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+    ec = p1_strains(space.mesh.points[nodes], v[nodes])
+    return 0.5 * weight * np.einsum("ti,tij,tj->t", ec, stiff[body], ec)
 
 
 # -- the bounds ------------------------------------------------------------------------------
@@ -348,7 +354,8 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
     Returns ``energy_upper = J(v)``, ``energy_lower = -L(u0) - S(sigma)``, ``gap`` (``G`` as
     the sum of its non-negative terms), ``gap_identity`` (``J(v) + L(u0) + S(sigma)``),
     ``error_bound = sqrt(2 G)``, ``contributions`` (``element (n_T,)``, ``sub (n_T, 3)``,
-    ``column (n_slabs,)`` on the curved pieces' slabs, ``contact (n_c,)``), ``data_oscillation``,
+    ``column (n_slabs,)`` on the curved pieces' slabs, ``contact (n_c,)``, ``continuation`` on the
+    pieces beyond free arcs, :func:`continuation_energy`), ``data_oscillation``,
     ``residuals``, ``guaranteed`` and ``reasons``. ``blocks``: :func:`constraint_blocks` or
     :func:`edge_constraints` (the default).
     """
@@ -367,7 +374,8 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
     comp = float(_sub_energy(space, sig).sum()) + 0.5 * float(g.ravel() @ (space.column_energy_matrix() @ g.ravel()))
     pe = float(_contact_integrals(space, p, None).sum())
     J = primal_energy(space, v)
-    G = float(sub.sum() + column.sum() + contact.sum())
+    beyond = continuation_energy(space, v)
+    G = float(sub.sum() + column.sum() + contact.sum() + beyond.sum())
     osc = data_oscillation(space)
     reasons = []
     if max(res.values()) > ADMISSIBLE_TOL:
@@ -388,7 +396,8 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
         reasons.append("body force beyond the free arcs' polygons is not in L(v)")
     return {"energy_upper": J, "energy_lower": -(comp + pe), "gap": G, "gap_identity": J + comp + pe,
             "error_bound": float(np.sqrt(2.0 * max(G, 0.0))), "complementary_energy": comp,
-            "contributions": {"element": sub.sum(1), "sub": sub, "column": column, "contact": contact},
+            "contributions": {"element": sub.sum(1), "sub": sub, "column": column, "contact": contact,
+                              "continuation": beyond},
             "data_oscillation": osc, "residuals": res, "displacement": v, "displacement_fix": fixinfo,
             "guaranteed": not reasons, "reasons": reasons}
 

@@ -524,8 +524,10 @@ def plot_bound_map(sol, ax=None, colorbar: bool = True, cax=None):
     _outlines(ax, sol, colors="w", linewidths=0.5)
     x0, x1, y0, y1 = bodies_window(sol)
     ax.set(xlim=(x0, x1), ylim=(y0, y1), aspect="equal", xlabel=f"x [{L}]", ylabel=f"y [{L}]")
-    ax.set_title(f"G = {b['gap']:.3g} (contact edges {float(b['contributions']['contact'].sum()):.3g}); "
-                 f"bound sqrt(2G) = {b['error_bound']:.3g}", fontsize=9)
+    beyond = float(b["contributions"].get("continuation", np.zeros(0)).sum())
+    ax.set_title(f"G = {b['gap']:.3g} (contact edges {float(b['contributions']['contact'].sum()):.3g}"
+                 + (f", beyond the free arcs {beyond:.3g}" if beyond else "")
+                 + f"); bound sqrt(2G) = {b['error_bound']:.3g}", fontsize=9)
     if colorbar:
         ax.figure.colorbar(pc, ax=None if cax is not None else ax, cax=cax,
                            label=f"contribution to G per unit area [{S}]")
