@@ -2,6 +2,7 @@
 exactness of both stress spaces on unstructured meshes, Kirsch's hole, the certified bounds with free
 arcs, determinism of the meshes, the outline checks and the refusals of malformed outlines."""
 
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -72,19 +73,34 @@ def test_patch_outline_mesh_is_unstructured_and_conforming(patch_outline):
     assert area.sum() == pytest.approx(40.0, rel=1e-12)  # the 10 x 4 block, to rounding
 
 
-def test_meshes_are_deterministic_across_processes(patch_outline, tmp_path):
-    """Same input, same mesh: gmsh on one thread with a fixed algorithm, in a fresh process."""
+def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path):
+    """Same input, same mesh: in a fresh process, on one gmsh thread or two (each block is cut in
+    two surfaces, meshed side by side; nodes and triangles are read surface by surface)."""
     f = tmp_path / "p.toml"
     f.write_text(PATCH)
     code = ("import hashlib, sys; from cvxdual.scene import load_scene; from cvxdual.geometry.mesh import build_mesh;"
             f"m = build_mesh(load_scene({str(f)!r}), 2);"
             "print(hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest())")
-    runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-            for _ in range(2)}
+    runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**os.environ, "OMP_NUM_THREADS": threads}).stdout
+            for threads in ("1", "2", "2")}
     m = build_mesh(patch_outline, 2)
     import hashlib
     here = hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest()
     assert runs == {here + "\n"}
+
+
+def test_rest_is_cut_in_two_surfaces_along_a_column(patch_outline):
+    """The middle column's vertical line runs from the strip to the far side in both blocks:
+    gmsh's nodes lie on it (the cut between the two surfaces), and triangles on both sides of it
+    share its edges (conforming: the edge test above holds on the whole body)."""
+    mesh = build_mesh(patch_outline, 2)
+    for bm in mesh.bodies:
+        x = bm.columns[round(0.5 * (len(bm.columns) - 1))]
+        far = 6.0 if bm.body.position == "upper" else -4.0
+        on = bm.rest.points[bm.rest.points[:, 0] == x]  # a vertical line: x exactly, no rounding
+        assert len(on) >= 3
+        assert np.isclose(np.abs(on[:, 1]).max(), abs(far), rtol=0, atol=1e-12)
 
 
 def test_sliding_supports_on_named_parts(patch_outline):

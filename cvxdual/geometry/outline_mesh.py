@@ -12,12 +12,17 @@ coordinates bit for bit.
 Sizes: the chain's spacing near the face, growing by :data:`GROWTH` times the distance from the
 chain up to twice the coarsest column spacing; arcs get at least ``4 * 2**level`` edges a quarter
 turn. Every size follows the columns, which halve per level, so ``--level`` halves the mesh.
-gmsh runs on one thread with a fixed algorithm: the same input gives the same mesh.
+Where a vertical cut from the middle of the chain reaches a straight part of the outline with no
+arc on the way (and the body has no hole), the rest is meshed as two surfaces on two threads (:func:`_cut`): gmsh's
+frontal algorithm costs 10-15 us a triangle at 1e5 and grows with the surface, so halves on two
+cores take about half the time. Each surface is meshed alone by a fixed algorithm and nodes and
+triangles are read surface by surface: the same input gives the same mesh, whatever the threads.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import threading
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
@@ -34,6 +39,14 @@ ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
+CUT_CANDIDATES = (0.5, 0.375, 0.625, 0.25, 0.75)  # where along the chain a cut is tried, in order
+
+
+def mesh_threads() -> int:
+    """gmsh's threads: one per surface (at most two), within ``OMP_NUM_THREADS`` when it is set
+    (the studies run each case on one thread)."""
+    limit = os.environ.get("OMP_NUM_THREADS", "")
+    return max(1, min(2, int(limit) if limit.isdigit() else (os.cpu_count() or 1)))
 
 
 def held_parts(body) -> set[str]:
@@ -159,6 +172,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         return float(field.at(np.array([p], float))[0])
 
     points: dict[tuple, int] = {}  # geometry points by coordinates: shared ends are one point
+    where: dict[int, tuple] = {}  # and their coordinates by tag
     sizes: dict[int, float] = {}  # the smallest size any curve asks of a point
 
     def point(p, lc=None) -> int:
@@ -166,14 +180,17 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         lc = size(key) if lc is None else lc
         if key not in points:
             points[key] = geo.addPoint(key[0], key[1], 0.0, lc)
+            where[points[key]] = key
         tag = points[key]
         sizes[tag] = min(lc, sizes.get(tag, math.inf))
         return tag
 
     fixed = []  # the strip's edges: two nodes each
+    shape: dict[int, tuple] = {}  # every curve's polyline (a line's two ends) and whether a cut may split it
 
     def line(a, b, keep=False) -> int:
         c = geo.addLine(a, b)
+        shape[c] = (np.array([where[a], where[b]]), not keep)
         if keep:
             fixed.append(c)
         return c
@@ -213,7 +230,9 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         if not s.is_arc:
             return [line(point(s.start), point(s.end))]
         if name in loaded:  # a supported or loaded arc: gmsh's polygon of it (not certified)
-            return [_arc(geo, point, s, level, size)]
+            c = _arc(geo, point, s, level, size)
+            shape[c] = (s.sample(64), False)
+            return [c]
         return _free_arc(s, concave, level, point, line, virtual)
 
     ccw = body.position == "upper"  # the path runs counter-clockwise round an upper body
@@ -225,22 +244,40 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         part_curves[last_name].append(("strip", 0))
     else:
         loop.append(line(point(ends["left"], w[0]), chain_pts[0], keep=True))
+    n_path = len(loop)
     for i in range(nc - 1):
         loop.append(line(chain_pts[i], chain_pts[i + 1], keep=True))
-    loops = [geo.addCurveLoop(loop)]
+    holes = []
     for h in body.outline.holes:
         cs = [c for s in h.segments for c in curve(h.name, s, True)]  # the body lies outside its holes
         part_curves[h.name] = cs
-        loops.append(geo.addCurveLoop(cs))
-    geo.addPlaneSurface(loops)
+        holes.append(cs)
+    # no cut round holes: a cut's own sizes coarsen gmsh's sizes near a hole (Kirsch's hoop error
+    # at level 1 grew from 5 % to 10 %), and the hole's side takes most of the time anyway
+    cut = None if holes else _cut(chain, body.sign, [shape[c] for c in loop[:n_path]], field)
+    if cut is None:
+        geo.addPlaneSurface([geo.addCurveLoop(loop)] + [geo.addCurveLoop(cs) for cs in holes])
+    else:  # two surfaces: right of the cut (chain k.., path to the hit) and left of it
+        k, j, hit = cut
+        c, h = loop[j], point(hit)
+        a, b = points[tuple(map(float, shape[c][0][0]))], points[tuple(map(float, shape[c][0][1]))]
+        c1, c2, through = line(a, h), line(h, b), line(chain_pts[k], h)
+        geo.remove([(1, c)])
+        for cs in part_curves.values():
+            if c in cs:
+                cs[cs.index(c):cs.index(c) + 1] = [c1, c2]
+        geo.addPlaneSurface([geo.addCurveLoop(loop[n_path + k:] + loop[:j] + [c1, -through])])
+        geo.addPlaneSurface([geo.addCurveLoop([through, c2] + loop[j + 1:n_path] + loop[n_path:n_path + k])])
     for tag, lc in sizes.items():
         geo.mesh.setSize([(0, tag)], lc)
     geo.synchronize()
     for c in fixed:
         gmsh.model.mesh.setTransfiniteCurve(c, 2)
+    threads = mesh_threads()
     for name, value in (("Mesh.Algorithm", ALGORITHM), ("Mesh.MeshSizeExtendFromBoundary", 1),
                         ("Mesh.MeshSizeFromPoints", 1), ("Mesh.MeshSizeFromCurvature", 0),
-                        ("Mesh.MeshSizeMax", cap), ("General.NumThreads", 1), ("Mesh.MaxRetries", 3),
+                        ("Mesh.MeshSizeMax", cap), ("General.NumThreads", threads), ("Mesh.MaxNumThreads1D", 1),
+                        ("Mesh.MaxNumThreads2D", threads), ("Mesh.MaxRetries", 3),
                         # no smoothing pass: 40 % of gmsh's time for 1.5 % of hertz's error (reports/outlines.md)
                         ("Mesh.Smoothing", 0)):
         gmsh.option.setNumber(name, value)
@@ -282,6 +319,44 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         raise MeshError(f"gmsh gave no usable mesh of body {body.name!r}")  # pragma: no cover - gmsh contract
     vn, vw = _virtual(virtual, xy, idx, tris, allp)
     return RestMesh(points=pts, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
+
+
+def _cut(chain: np.ndarray, sign: int, path: list, field: SizeField):
+    """A vertical cut from a chain node away from the face to the outline, or None: ``(k, j,
+    hit)``, the chain node, the index in ``path`` (the outer loop's curves, as ``(polyline,
+    splittable)``) of the straight part it ends on, and the end point. Taken only where the first
+    thing the cut meets is that part, away from its ends and from every other outline vertex by
+    half the element size there (a clean split), not an arc or a strip edge."""
+    segs, owner = [], []
+    for i, (poly, _) in enumerate(path):
+        segs.append(np.stack([poly[:-1], poly[1:]], 1))
+        owner.append(np.full(len(poly) - 1, i))
+    segs, owner = np.concatenate(segs), np.concatenate(owner)
+    verts = np.concatenate([segs[:, 0], segs[:, 1]])
+    nc = len(chain)
+    for k in dict.fromkeys(int(round(f * (nc - 1))) for f in CUT_CANDIDATES):
+        if not 1 <= k <= nc - 2:
+            continue
+        x, y0 = chain[k]
+        a, b = segs[:, 0], segs[:, 1]
+        span = b[:, 0] - a[:, 0]
+        crosses = ((a[:, 0] - x) * (b[:, 0] - x) <= 0) & (span != 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            y = a[:, 1] + (x - a[:, 0]) / span * (b[:, 1] - a[:, 1])
+        ahead = crosses & (sign * (y - y0) > 0)
+        if not ahead.any():
+            continue
+        first = int(np.argmin(np.where(ahead, sign * (y - y0), np.inf)))
+        j, hit = int(owner[first]), np.array([x, y[first]])
+        if not path[j][1]:
+            continue  # an arc or a strip edge first
+        h = 0.5 * float(field.at(hit[None])[0])
+        lo, hi = sorted((y0, hit[1]))
+        near = (np.abs(verts[:, 0] - x) < h) & (verts[:, 1] > lo - h) & (verts[:, 1] < hi + h)
+        if near.any():
+            continue
+        return k, j, hit
+    return None
 
 
 def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
