@@ -73,27 +73,26 @@ def test_patch_outline_mesh_is_unstructured_and_conforming(patch_outline):
     assert area.sum() == pytest.approx(40.0, rel=1e-12)  # the 10 x 4 block, to rounding
 
 
-def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path):
-    """Same input, same mesh: in a fresh process, on one gmsh thread or two (each block is cut in
-    two surfaces, meshed side by side; nodes and triangles are read surface by surface)."""
+@pytest.mark.parametrize("scene", ["patch-outline", "block-with-hole"])
+def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path, scene):
+    """Same input, same mesh: in a fresh process, on one gmsh thread or two (each body is cut in
+    surfaces, meshed side by side; nodes and triangles are read surface by surface)."""
     f = tmp_path / "p.toml"
     f.write_text(PATCH)
-    code = ("import hashlib, sys; from cvxdual.scene import load_scene; from cvxdual.geometry.mesh import build_mesh;"
-            f"m = build_mesh(load_scene({str(f)!r}), 2);"
+    source = str(f) if scene == "patch-outline" else scene
+    code = ("import hashlib, sys; from cvxdual.pipeline import as_scene; from cvxdual.geometry.mesh import build_mesh;"
+            f"m = build_mesh(as_scene({source!r}), 2);"
             "print(hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest())")
     runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "OMP_NUM_THREADS": threads}).stdout
             for threads in ("1", "2", "2")}
-    m = build_mesh(patch_outline, 2)
-    import hashlib
-    here = hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest()
-    assert runs == {here + "\n"}
+    assert len(runs) == 1
 
 
-def test_rest_is_cut_in_two_surfaces_along_a_column(patch_outline):
+def test_rest_is_cut_into_surfaces_along_columns(patch_outline):
     """The middle column's vertical line runs from the strip to the far side in both blocks:
-    gmsh's nodes lie on it (the cut between the two surfaces), and triangles on both sides of it
-    share its edges (conforming: the edge test above holds on the whole body)."""
+    gmsh's nodes lie on it (a cut between two surfaces), and triangles on both sides of it share
+    its edges (conforming: the edge test above holds on the whole body)."""
     mesh = build_mesh(patch_outline, 2)
     for bm in mesh.bodies:
         x = bm.columns[round(0.5 * (len(bm.columns) - 1))]
@@ -101,6 +100,28 @@ def test_rest_is_cut_in_two_surfaces_along_a_column(patch_outline):
         on = bm.rest.points[bm.rest.points[:, 0] == x]  # a vertical line: x exactly, no rounding
         assert len(on) >= 3
         assert np.isclose(np.abs(on[:, 1]).max(), abs(far), rtol=0, atol=1e-12)
+
+
+def test_hole_body_is_cut_through_its_hole():
+    """block-with-hole's lower block is cut along x = 0: from the strip to the hole's top, round
+    the hole (each surface keeps one half) and from its bottom to the block's bottom. The mesh
+    conforms (every edge in one or two triangles) and its boundary edges are exactly the named
+    parts' and the face's: the cut leaves no seam."""
+    mesh = build_mesh(load_scene("block-with-hole"), 2)
+    bm = next(b for b in mesh.bodies if b.body.name == "bottom")
+    on = bm.rest.points[bm.rest.points[:, 0] == 0.0]  # vertical legs: x exactly
+    assert np.any(on[:, 1] > -9.5) and np.any(on[:, 1] < -10.5)  # above and below the hole
+    assert np.isclose(on[:, 1].min(), -20.0, rtol=0, atol=1e-12)  # down to the bottom
+    tris = bm.triangles()
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    keys, count = np.unique(e[:, 0] * mesh.n_nodes + e[:, 1], return_counts=True)
+    assert set(count) <= {1, 2}
+    named = set()
+    for side in ("face", "right", "bottom", "left", "hole"):
+        n = bm.side_nodes(side)
+        named |= set(np.minimum(n[:-1], n[1:]) * mesh.n_nodes + np.maximum(n[:-1], n[1:]))
+    assert bm.side_nodes("hole")[0] == bm.side_nodes("hole")[-1]  # the hole's chain closes on itself
+    assert set(keys[count == 1]) == named
 
 
 def test_sliding_supports_on_named_parts(patch_outline):

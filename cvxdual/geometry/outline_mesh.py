@@ -9,14 +9,18 @@ meshed by gmsh (its Python API) conforming to the chain: one geometry point per 
 two-node transfinite lines between them, so gmsh adds no node on the chain and keeps the given
 coordinates bit for bit.
 
-Sizes: the chain's spacing near the face, growing by :data:`GROWTH` times the distance from the
-chain up to twice the coarsest column spacing; arcs get at least ``4 * 2**level`` edges a quarter
-turn. Every size follows the columns, which halve per level, so ``--level`` halves the mesh.
-Where a vertical cut from the middle of the chain reaches a straight part of the outline with no
-arc on the way (and the body has no hole), the rest is meshed as two surfaces on two threads (:func:`_cut`): gmsh's
-frontal algorithm costs 10-15 us a triangle at 1e5 and grows with the surface, so halves on two
-cores take about half the time. Each surface is meshed alone by a fixed algorithm and nodes and
-triangles are read surface by surface: the same input gives the same mesh, whatever the threads.
+Sizes: asked at the outline's points (:class:`SizeField`: the chain's spacing, growing by
+:data:`GROWTH` times the distance from the chain and the arcs, up to twice the coarsest column
+spacing; arcs get at least ``4 * 2**level`` edges a quarter turn); inside, gmsh interpolates the
+boundary's sizes. Every size follows the columns, which halve per level, so ``--level`` halves
+the mesh.
+
+Where cuts from nodes of the chain reach a straight part of the outline
+(:mod:`~cvxdual.geometry.outline_cut`, through a hole in the way), the rest is meshed as up to
+eight surfaces on two threads: gmsh's frontal algorithm costs more a triangle the larger the
+surface, so small surfaces on two cores take a third of the time of one surface or less. Each
+surface is meshed alone by a fixed algorithm and nodes and triangles are read surface by surface:
+the same input gives the same mesh, whatever the threads.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
@@ -32,6 +37,7 @@ import numpy as np
 from ..errors import MeshError
 from ..scene.geo import import_gmsh
 from ..scene.outline import segments_meet
+from .outline_cut import find_cuts, inside
 
 GROWTH = 0.4  # element size grows by 0.4 times the distance from the strip (a mild grading)
 STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells
@@ -39,7 +45,6 @@ ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
-CUT_CANDIDATES = (0.5, 0.375, 0.625, 0.25, 0.75)  # where along the chain a cut is tried, in order
 
 
 def mesh_threads() -> int:
@@ -134,9 +139,22 @@ def forget_meshes() -> None:
     _cached.cache_clear()
 
 
+_SPENT = [0.0]  # seconds spent meshing with gmsh in this process (studies' timings)
+
+
+def gmsh_seconds() -> float:
+    """Wall time spent meshing outline bodies (gmsh and reading its mesh) in this process so far:
+    a run's share is the difference of two readings over the run's own time."""
+    return _SPENT[0]
+
+
 @lru_cache(maxsize=4)
 def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
-    rest = _gmsh_mesh(body, np.frombuffer(columns), np.frombuffer(inner_y), level)
+    t = time.perf_counter()
+    try:
+        rest = _gmsh_mesh(body, np.frombuffer(columns), np.frombuffer(inner_y), level)
+    finally:
+        _SPENT[0] += time.perf_counter() - t
     for a in (rest.points, rest.triangles, rest.virtual_nodes, rest.virtual_weight, *rest.parts.values()):
         a.flags.writeable = False
     return rest
@@ -252,22 +270,12 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         cs = [c for s in h.segments for c in curve(h.name, s, True)]  # the body lies outside its holes
         part_curves[h.name] = cs
         holes.append(cs)
-    # no cut round holes: a cut's own sizes coarsen gmsh's sizes near a hole (Kirsch's hoop error
-    # at level 1 grew from 5 % to 10 %), and the hole's side takes most of the time anyway
-    cut = None if holes else _cut(chain, body.sign, [shape[c] for c in loop[:n_path]], field)
-    if cut is None:
+    cuts = find_cuts(chain, body.sign, [shape[c] for c in loop[:n_path]], [[shape[c] for c in cs] for cs in holes],
+                     field.at)
+    if not cuts:
         geo.addPlaneSurface([geo.addCurveLoop(loop)] + [geo.addCurveLoop(cs) for cs in holes])
-    else:  # two surfaces: right of the cut (chain k.., path to the hit) and left of it
-        k, j, hit = cut
-        c, h = loop[j], point(hit)
-        a, b = points[tuple(map(float, shape[c][0][0]))], points[tuple(map(float, shape[c][0][1]))]
-        c1, c2, through = line(a, h), line(h, b), line(chain_pts[k], h)
-        geo.remove([(1, c)])
-        for cs in part_curves.values():
-            if c in cs:
-                cs[cs.index(c):cs.index(c) + 1] = [c1, c2]
-        geo.addPlaneSurface([geo.addCurveLoop(loop[n_path + k:] + loop[:j] + [c1, -through])])
-        geo.addPlaneSurface([geo.addCurveLoop([through, c2] + loop[j + 1:n_path] + loop[n_path:n_path + k])])
+    else:
+        _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line)
     for tag, lc in sizes.items():
         geo.mesh.setSize([(0, tag)], lc)
     geo.synchronize()
@@ -321,42 +329,68 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     return RestMesh(points=pts, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
 
 
-def _cut(chain: np.ndarray, sign: int, path: list, field: SizeField):
-    """A vertical cut from a chain node away from the face to the outline, or None: ``(k, j,
-    hit)``, the chain node, the index in ``path`` (the outer loop's curves, as ``(polyline,
-    splittable)``) of the straight part it ends on, and the end point. Taken only where the first
-    thing the cut meets is that part, away from its ends and from every other outline vertex by
-    half the element size there (a clean split), not an arc or a strip edge."""
-    segs, owner = [], []
-    for i, (poly, _) in enumerate(path):
-        segs.append(np.stack([poly[:-1], poly[1:]], 1))
-        owner.append(np.full(len(poly) - 1, i))
-    segs, owner = np.concatenate(segs), np.concatenate(owner)
-    verts = np.concatenate([segs[:, 0], segs[:, 1]])
-    nc = len(chain)
-    for k in dict.fromkeys(int(round(f * (nc - 1))) for f in CUT_CANDIDATES):
-        if not 1 <= k <= nc - 2:
+def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line) -> None:
+    """The rest as plane surfaces between ``cuts`` (left to right, :mod:`~cvxdual.geometry.outline_cut`):
+    ``loop`` is the outer loop (``n_path`` curves of the outline, from the chain's right end round
+    to its left end, then the chain's), each curve a cut ends on is split there (in its part too),
+    a hole a cut runs through gives each side one half."""
+    def at(p) -> int:
+        return point(tuple(map(float, p)))
+
+    ends = {}  # the curves cut ends lie on: their ends' gmsh points, in order along the curve
+    for m, c in enumerate(cuts):
+        ends.setdefault(c.j, []).append(m)
+    path, hit_at = [], {}
+    for i, c in enumerate(loop[:n_path]):
+        if i not in ends:
+            path.append(c)
             continue
-        x, y0 = chain[k]
-        a, b = segs[:, 0], segs[:, 1]
-        span = b[:, 0] - a[:, 0]
-        crosses = ((a[:, 0] - x) * (b[:, 0] - x) <= 0) & (span != 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            y = a[:, 1] + (x - a[:, 0]) / span * (b[:, 1] - a[:, 1])
-        ahead = crosses & (sign * (y - y0) > 0)
-        if not ahead.any():
+        a = shape[c][0][0]
+        ms = sorted(ends[i], key=lambda m: float(np.hypot(*(cuts[m].end - a))))
+        pts = [at(a)] + [at(cuts[m].end) for m in ms] + [at(shape[c][0][1])]
+        pieces = [line(pts[q], pts[q + 1]) for q in range(len(pts) - 1)]
+        for q, m in enumerate(ms):
+            hit_at[m] = len(path) + q + 1  # the first curve after the cut's end
+        path += pieces
+        geo.remove([(1, c)])
+        for cs in part_curves.values():
+            if c in cs:
+                cs[cs.index(c):cs.index(c) + 1] = pieces
+    chain = loop[n_path:]
+    rest = list(holes)
+    down = []  # each cut from its chain node to its end: (with the hole's left half, with its right half)
+    for c in cuts:
+        k_pt, h = chain_pts[c.k], at(c.end)
+        if c.hole is None:
+            d = [line(k_pt, h)]
+            down.append((d, d))
             continue
-        first = int(np.argmin(np.where(ahead, sign * (y - y0), np.inf)))
-        j, hit = int(owner[first]), np.array([x, y[first]])
-        if not path[j][1]:
-            continue  # an arc or a strip edge first
-        h = 0.5 * float(field.at(hit[None])[0])
-        lo, hi = sorted((y0, hit[1]))
-        near = (np.abs(verts[:, 0] - x) < h) & (verts[:, 1] > lo - h) & (verts[:, 1] < hi + h)
-        if near.any():
-            continue
-        return k, j, hit
-    return None
+        cs = holes[c.hole]
+        rest.remove(cs)
+        starts = [tuple(shape[t][0][0]) for t in cs]
+        i1, i2 = starts.index(tuple(c.near)), starts.index(tuple(c.far))
+        a = cs[i1:i2] if i1 < i2 else cs[i1:] + cs[:i2]  # near -> far, the hole's own way round
+        b = cs[i2:i1] if i2 < i1 else cs[i2:] + cs[:i1]  # far -> near
+        back_b = [-t for t in reversed(b)]  # near -> far, the other way
+        a_right = np.mean([shape[t][0][0][0] for t in a]) > c.end[0]
+        leg1, leg2 = line(k_pt, at(c.near)), line(at(c.far), h)
+        left, right = (back_b, a) if a_right else (a, back_b)
+        down.append(([leg1, *left, leg2], [leg1, *right, leg2]))
+
+    def up(curves):
+        return [-t for t in reversed(curves)]
+
+    n = len(cuts)
+    regions = [chain[cuts[-1].k:] + path[:hit_at[n - 1]] + up(down[-1][1])]  # right of the last cut
+    for m in range(n - 1, 0, -1):  # between cut m - 1 and cut m
+        regions.append(chain[cuts[m - 1].k:cuts[m].k] + down[m][0] + path[hit_at[m]:hit_at[m - 1]]
+                       + up(down[m - 1][1]))
+    regions.append(down[0][0] + path[hit_at[0]:] + chain[:cuts[0].k])  # left of the first cut
+    for r, region in enumerate(regions):
+        ring = np.concatenate([shape[abs(t)][0][::1 if t > 0 else -1] for t in region])
+        mine = [cs for cs in rest if r == len(regions) - 1 or inside(ring, shape[cs[0]][0][0])]
+        rest = [cs for cs in rest if cs not in mine]
+        geo.addPlaneSurface([geo.addCurveLoop(region)] + [geo.addCurveLoop(cs) for cs in mine])
 
 
 def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
@@ -370,12 +404,13 @@ def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, a
     p = allp[c_nodes]
     d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     c_area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-    # the triangle on each chord: its edge key among all the triangles' edges
+    # the triangle on each chord: its edge key among the edges of the triangles at the chords' ends
     n = int(tris.max()) + 1
-    keys = np.sort(np.stack([tris, np.roll(tris, -1, axis=1)], -1).reshape(-1, 2), axis=1) @ np.array([n, 1])
-    order = np.argsort(keys)
     ends = np.sort(idx[_match_rows(chord.reshape(-1, 2), xy)].reshape(-1, 2), axis=1)
-    t = order[np.searchsorted(keys[order], ends @ np.array([n, 1]))] // 3
+    near = np.flatnonzero(np.isin(tris, ends).any(axis=1))
+    keys = np.sort(np.stack([tris[near], np.roll(tris[near], -1, axis=1)], -1).reshape(-1, 2), axis=1) @ [n, 1]
+    order = np.argsort(keys)
+    t = near[order[np.searchsorted(keys[order], ends @ np.array([n, 1]))] // 3]
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
 
@@ -407,8 +442,9 @@ def _check_strip(body, chain: np.ndarray) -> None:
 
 def _match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """For each row of ``a`` ``(m, 2)``, the index of the bit-identical row of ``b``, or -1."""
-    view = np.dtype([("x", float), ("y", float)])
-    av, bv = np.ascontiguousarray(a).view(view).ravel(), np.ascontiguousarray(b).view(view).ravel()
+    # rows as complex numbers: numpy sorts those by real then imaginary part, and fast
+    av = np.ascontiguousarray(a, float).view(np.complex128).ravel()
+    bv = np.ascontiguousarray(b, float).view(np.complex128).ravel()
     order = np.argsort(bv)
     pos = np.clip(np.searchsorted(bv[order], av), 0, len(bv) - 1)
     return np.where(bv[order][pos] == av, order[pos], -1)
