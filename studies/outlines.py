@@ -226,8 +226,8 @@ def main(argv=None) -> int:
     e = estimate_rows([1, 2] if q else [2, 3, 4, 5])
     t = timing_rows([("block-with-hole", 2, "p0", "fast")] if q else
                     [(HERTZ_OUTLINE, 6, "p0", None), (HERTZ_OUTLINE, 6, "p0", "fast"), (HERTZ_OUTLINE, 6, "eq", "fast"),
-                     ("block-with-hole", 4, "p0", None), ("block-with-hole", 4, "p0", "fast"),
-                     ("block-with-hole", 4, "eq", "fast")])
+                     ("block-with-hole", 5, "p0", None), ("block-with-hole", 5, "p0", "fast"),
+                     ("block-with-hole", 5, "eq", "fast")])
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / "outlines.csv", pd.concat([h, k, r, e, t]).to_csv(index=False, float_format="%.6g"))
     write_text(out / "outlines.md", report(h, k, r, e, t))

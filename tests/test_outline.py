@@ -17,7 +17,7 @@ from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
 from cvxdual.geometry.boundary import supported
 from cvxdual.geometry.mesh import build_mesh
-from cvxdual.geometry.outline_mesh import forget_meshes
+from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
 from cvxdual.geometry.triangulation import discretize
 from cvxdual.scene import load_scene
 
@@ -73,20 +73,22 @@ def test_patch_outline_mesh_is_unstructured_and_conforming(patch_outline):
     assert area.sum() == pytest.approx(40.0, rel=1e-12)  # the 10 x 4 block, to rounding
 
 
-@pytest.mark.parametrize("scene", ["patch-outline", "block-with-hole"])
-def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path, scene):
+@pytest.mark.parametrize(("scene", "level"), [("patch-outline", 4), ("block-with-hole", 3)])
+def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path, scene, level):
     """Same input, same mesh: in a fresh process, on one gmsh thread or two (each body is cut in
-    surfaces, meshed side by side; nodes and triangles are read surface by surface)."""
+    surfaces, meshed side by side; nodes and triangles are read surface by surface). The levels
+    give 65 columns: more than outline_mesh.SMALL, so two threads are used where allowed."""
     f = tmp_path / "p.toml"
     f.write_text(PATCH)
     source = str(f) if scene == "patch-outline" else scene
     code = ("import hashlib, sys; from cvxdual.pipeline import as_scene; from cvxdual.geometry.mesh import build_mesh;"
-            f"m = build_mesh(as_scene({source!r}), 2);"
+            f"m = build_mesh(as_scene({source!r}), {level});"
             "print(hashlib.sha256(m.points.tobytes() + m.triangles().tobytes()).hexdigest())")
     runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "OMP_NUM_THREADS": threads}).stdout
             for threads in ("1", "2", "2")}
     assert len(runs) == 1
+    assert len(build_mesh(cd.load_scene(source), level).bodies[0].columns) > SMALL  # two threads were asked
 
 
 def test_rest_is_cut_into_surfaces_along_columns(patch_outline):

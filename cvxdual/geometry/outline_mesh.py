@@ -45,6 +45,7 @@ ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
+SMALL = 64  # bodies with at most this many columns are meshed on one thread (0.1 s to start a second, seen)
 
 
 def mesh_threads() -> int:
@@ -281,7 +282,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     geo.synchronize()
     for c in fixed:
         gmsh.model.mesh.setTransfiniteCurve(c, 2)
-    threads = mesh_threads()
+    threads = mesh_threads() if nc > SMALL else 1  # a second thread's start costs more than a small mesh
     for name, value in (("Mesh.Algorithm", ALGORITHM), ("Mesh.MeshSizeExtendFromBoundary", 1),
                         ("Mesh.MeshSizeFromPoints", 1), ("Mesh.MeshSizeFromCurvature", 0),
                         ("Mesh.MeshSizeMax", cap), ("General.NumThreads", threads), ("Mesh.MaxNumThreads1D", 1),
