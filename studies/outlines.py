@@ -198,11 +198,11 @@ def report(h, k, r, e, t) -> str:
         us_gmsh=lambda d: 1e6 * d.gmsh_s / d.pieces, us_rest=lambda d: 1e6 * (d.total_s - d.gmsh_s) / d.pieces)
     out += ["## 5. gmsh's share of an end-to-end run", "",
             "gmsh's share by route (acceptance: at most 30 % at 1e5 pieces): "
-            + "; ".join(f"{sv} {sp}: {g.gmsh_share.min():.0%} to {g.gmsh_share.max():.0%}"
+            + "; ".join(f"{sv} {sp}: {g.gmsh_share.min():.1%} to {g.gmsh_share.max():.1%}"
                         for (sv, sp), g in t.groupby(["solver", "space"]))
             + ". Within 30 %: " + (", ".join(f"{a} {sv} {sp}" for a, sv, sp in over[["scene", "solver", "space"]][
                 over.gmsh_share <= 0.3].itertuples(index=False)) or "none")
-            + "; above: " + (", ".join(f"{a} {sv} {sp} ({v:.0%})" for a, sv, sp, v in over[
+            + "; above: " + (", ".join(f"{a} {sv} {sp} ({v:.1%})" for a, sv, sp, v in over[
                 ["scene", "solver", "space", "gmsh_share"]][over.gmsh_share > 0.3].itertuples(index=False)) or "none")
             + ". Each body is meshed as eight surfaces on two threads (cuts from the strip, one "
             f"through the hole in the block); on the fast path gmsh spends {fast.us_gmsh.min():.1f}-"

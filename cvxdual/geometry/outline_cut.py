@@ -61,6 +61,7 @@ def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size) -> li
 
 
 def _try(k, start, sign, path, holes, segs, owner, hole_of, size) -> Cut | None:
+    """The cut from chain node ``k`` at ``start``, if it is clean (:func:`find_cuts`)."""
     hits = _ray(segs, start, sign)
     if not len(hits):
         return None

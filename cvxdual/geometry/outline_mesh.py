@@ -338,7 +338,7 @@ def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, poi
     def at(p) -> int:
         return point(tuple(map(float, p)))
 
-    ends = {}  # the curves cut ends lie on: their ends' gmsh points, in order along the curve
+    ends = {}  # curve index in the path -> the cuts ending on it
     for m, c in enumerate(cuts):
         ends.setdefault(c.j, []).append(m)
     path, hit_at = [], {}
