@@ -193,17 +193,16 @@ def report(h, k, r, e, t) -> str:
             f"{PROBE_COLUMNS} columns and multiplies by 4 per level above (every size halves per level); ratio = "
             "estimated / meshed, at least 1 where the count per level grows by less than 4.", "",
             md_table(e.drop(columns="part")), ""]
-    over = t.assign(solver=t.solver.astype(str))
     fast = t[(t.solver == "fast") & (t.space == "p0")].assign(
         us_gmsh=lambda d: 1e6 * d.gmsh_s / d.pieces, us_rest=lambda d: 1e6 * (d.total_s - d.gmsh_s) / d.pieces)
     out += ["## 5. gmsh's share of an end-to-end run", "",
             "gmsh's share by route (acceptance: at most 30 % at 1e5 pieces): "
             + "; ".join(f"{sv} {sp}: {g.gmsh_share.min():.1%} to {g.gmsh_share.max():.1%}"
                         for (sv, sp), g in t.groupby(["solver", "space"]))
-            + ". Within 30 %: " + (", ".join(f"{a} {sv} {sp}" for a, sv, sp in over[["scene", "solver", "space"]][
-                over.gmsh_share <= 0.3].itertuples(index=False)) or "none")
-            + "; above: " + (", ".join(f"{a} {sv} {sp} ({v:.1%})" for a, sv, sp, v in over[
-                ["scene", "solver", "space", "gmsh_share"]][over.gmsh_share > 0.3].itertuples(index=False)) or "none")
+            + ". Within 30 %: " + (", ".join(f"{r.scene} {r.solver} {r.space}" for r in t[t.gmsh_share <= 0.3]
+                                             .itertuples()) or "none")
+            + "; above: " + (", ".join(f"{r.scene} {r.solver} {r.space} ({r.gmsh_share:.1%})"
+                                       for r in t[t.gmsh_share > 0.3].itertuples()) or "none")
             + ". Each body is meshed as eight surfaces on two threads (cuts from the strip, one "
             f"through the hole in the block); on the fast path gmsh spends {fast.us_gmsh.min():.1f}-"
             f"{fast.us_gmsh.max():.1f} us of wall time a piece, the rest of the run {fast.us_rest.min():.1f}-"

@@ -409,9 +409,10 @@ def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, a
     n = int(tris.max()) + 1
     ends = np.sort(idx[_match_rows(chord.reshape(-1, 2), xy)].reshape(-1, 2), axis=1)
     near = np.flatnonzero(np.isin(tris, ends).any(axis=1))
-    keys = np.sort(np.stack([tris[near], np.roll(tris[near], -1, axis=1)], -1).reshape(-1, 2), axis=1) @ [n, 1]
+    key = np.array([n, 1])
+    keys = np.sort(np.stack([tris[near], np.roll(tris[near], -1, axis=1)], -1).reshape(-1, 2), axis=1) @ key
     order = np.argsort(keys)
-    t = near[order[np.searchsorted(keys[order], ends @ np.array([n, 1]))] // 3]
+    t = near[order[np.searchsorted(keys[order], ends @ key)] // 3]
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
 
