@@ -26,7 +26,8 @@ import numpy as np
 from ..errors import MeshError
 from ..scene.scene import Body, Scene
 from ..validate import short
-from .outline_mesh import RestMesh, held_parts, mesh_rest, strip_depth
+from .outline_mesh import RestMesh, held_parts, mesh_rest
+from .outline_sizes import strip_depth
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
 PROBE_COLUMNS = 32  # outline bodies are counted on a mesh of at most this many columns, scaled up (0.01-0.06 s)

@@ -128,10 +128,14 @@ def _of_curve(segs, poly) -> np.ndarray:
     return np.any(np.all(segs[:, None] == mine[None], axis=(-1, -2)), axis=1)
 
 
-def inside(ring: np.ndarray, p) -> bool:
-    """Whether ``p`` lies inside the closed polyline ``ring`` (even-odd rule)."""
-    a, b = ring, np.roll(ring, -1, axis=0)
-    up = (a[:, 1] > p[1]) != (b[:, 1] > p[1])
+def inside(ring: np.ndarray, p):
+    """Whether ``p`` lies inside the closed polyline ``ring`` (even-odd rule); ``p`` one point
+    ``(2,)`` (a bool) or many ``(m, 2)`` (a bool array)."""
+    q = np.asarray(p, float)
+    pts = q.reshape(-1, 1, 2)
+    a, b = ring[None], np.roll(ring, -1, axis=0)[None]
+    up = (a[..., 1] > pts[..., 1]) != (b[..., 1] > pts[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        x = a[:, 0] + (p[1] - a[:, 1]) / (b[:, 1] - a[:, 1]) * (b[:, 0] - a[:, 0])
-    return bool(np.count_nonzero(up & (x > p[0])) % 2)
+        x = a[..., 0] + (pts[..., 1] - a[..., 1]) / (b[..., 1] - a[..., 1]) * (b[..., 0] - a[..., 0])
+    odd = np.count_nonzero(up & (x > pts[..., 0]), axis=1) % 2 == 1
+    return bool(odd[0]) if q.ndim == 1 else odd

@@ -9,11 +9,11 @@ meshed by gmsh (its Python API) conforming to the chain: one geometry point per 
 two-node transfinite lines between them, so gmsh adds no node on the chain and keeps the given
 coordinates bit for bit.
 
-Sizes: asked at the outline's points (:class:`SizeField`: the chain's spacing, growing by
-:data:`GROWTH` times the distance from the chain and the arcs, up to twice the coarsest column
-spacing; arcs get at least ``4 * 2**level`` edges a quarter turn); inside, gmsh interpolates the
-boundary's sizes. Every size follows the columns, which halve per level, so ``--level`` halves
-the mesh.
+Sizes (:mod:`~cvxdual.geometry.outline_sizes`): the chain's spacing and the arcs' edges
+(``4 * 2**level`` a quarter turn), growing with the distance from them by ``0.4 / 2**level``, up
+to twice the coarsest column spacing; every size halves a level, so ``--level`` halves the mesh
+everywhere. gmsh reads sizes at geometry points only: the outline's, stops along the cut lines
+and rings of points round the arcs embedded in the surfaces.
 
 Where cuts from nodes of the chain reach a straight part of the outline
 (:mod:`~cvxdual.geometry.outline_cut`, through a hole in the way), the rest is meshed as up to
@@ -30,7 +30,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass, replace
-from functools import cached_property, lru_cache
+from functools import lru_cache
 
 import numpy as np
 
@@ -38,10 +38,8 @@ from ..errors import MeshError
 from ..scene.geo import import_gmsh
 from ..scene.outline import segments_meet
 from .outline_cut import find_cuts, inside
+from .outline_sizes import STRIP_ASPECT, SizeField, arc_edges, arc_size, graded_stops, steering, strip_depth
 
-GROWTH = 0.4  # element size grows by 0.4 times the distance from the strip (a mild grading)
-STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells
-ARC_EDGES = 4  # edges per quarter turn of an arc at level 0 (doubling per level)
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
 _LOCK = threading.Lock()  # gmsh keeps one global model per process
@@ -74,63 +72,12 @@ class RestMesh:
     virtual_weight: np.ndarray  # (m,): the area it covers
 
 
-def strip_depth(columns: np.ndarray) -> np.ndarray:
-    """Depth of the strip at each column: the mean of the adjacent column spacings."""
-    w = np.diff(columns)
-    return STRIP_ASPECT * np.concatenate([[w[0]], 0.5 * (w[:-1] + w[1:]), [w[-1]]])
-
-
-NEAREST = 16  # sources compared at each point of the size field
-
-
-@dataclass(frozen=True)
-class SizeField:
-    """The element size asked at the outline's points (gmsh interpolates the boundary's sizes
-    inside). Sources: the strip's inner chain (each node's column spacing) and every arc's
-    vertices (``ARC_EDGES * 2**level`` edges a quarter turn); the size at a point is the smallest
-    of ``s + GROWTH * max(0, d - s)`` over the nearby sources, at most ``cap`` (twice the coarsest
-    column spacing)."""
-
-    points: np.ndarray
-    sizes: np.ndarray
-    cap: float
-
-    @classmethod
-    def of(cls, body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> SizeField:
-        w = strip_depth(columns) / STRIP_ASPECT
-        src, size = [np.stack([columns, inner_y], 1)], [w]
-        for p in body.outline.parts:
-            for seg in p.segments:
-                if seg.is_arc:  # a source at every vertex of the arc's polygon
-                    q = seg.sample(max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES * 2**level)))
-                    src.append(q)
-                    size.append(np.full(len(q), arc_size(seg, level)))
-        return cls(np.concatenate(src), np.concatenate(size), 2.0 * float(np.diff(columns).max()))
-
-    @cached_property
-    def _tree(self):
-        from scipy.spatial import cKDTree
-
-        return cKDTree(self.points)
-
-    def at(self, pts: np.ndarray) -> np.ndarray:
-        k = min(NEAREST, len(self.points))
-        d, i = self._tree.query(pts, k=k)
-        d, i = d.reshape(len(pts), k), i.reshape(len(pts), k)
-        s = self.sizes[i]
-        return np.minimum(self.cap, np.min(s + GROWTH * np.maximum(d - s, 0.0), axis=1))
-
-
-def arc_size(seg, level: int) -> float:
-    """Edge length on an arc: ``ARC_EDGES * 2**level`` edges a quarter turn."""
-    return math.dist(seg.start, seg.center) * (math.pi / 2) / (ARC_EDGES * 2**level)
-
-
 def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
     """Mesh the body between the strip's inner chain ``(columns, inner_y)`` and its outline.
 
-    The last few meshes are kept (read-only arrays): the size estimate meshes small levels in full
-    before the run meshes them again (:func:`cvxdual.geometry.mesh.mesh_size`)."""
+    The last eight meshes are kept (read-only arrays): the size estimate meshes a small level in
+    full (:func:`cvxdual.geometry.mesh.mesh_size`) and the fast path's warm start meshes coarse
+    levels; a run of two bodies meets each of them again."""
     columns, inner_y = np.asarray(columns, float), np.asarray(inner_y, float)
     return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level))
 
@@ -149,7 +96,7 @@ def gmsh_seconds() -> float:
     return _SPENT[0]
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=8)
 def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
     t = time.perf_counter()
     try:
@@ -273,13 +220,29 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         holes.append(cs)
     cuts = find_cuts(chain, body.sign, [shape[c] for c in loop[:n_path]], [[shape[c] for c in cs] for cs in holes],
                      field.at)
+    def ring(curves) -> np.ndarray:
+        return np.concatenate([shape[abs(t)][0][::1 if t > 0 else -1] for t in curves])
+
+    def straight(a, b) -> list[int]:  # a line cut through the body, with its size stops (graded_stops)
+        stops, lc = graded_stops(where[a], where[b], field)
+        ids = [a, *(point(q, float(s)) for q, s in zip(stops, lc, strict=True)), b]
+        return [line(ids[j], ids[j + 1]) for j in range(len(ids) - 1)]
+
     if not cuts:
-        geo.addPlaneSurface([geo.addCurveLoop(loop)] + [geo.addCurveLoop(cs) for cs in holes])
+        regions = [(loop, holes)]
     else:
-        _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line)
+        regions = _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line, straight, ring)
+    surfaces = [geo.addPlaneSurface([geo.addCurveLoop(outer)] + [geo.addCurveLoop(cs) for cs in inner])
+                for outer, inner in regions]
+    steer = steering(body, field, level, [(ring(outer), [ring(cs) for cs in inner]) for outer, inner in regions],
+                     np.concatenate([np.stack([p[:-1], p[1:]], 1) for p, _ in shape.values()]))
+    embedded = [[point(q, float(lc)) for q, lc in zip(pts, lcs, strict=True)] for pts, lcs in steer]
     for tag, lc in sizes.items():
         geo.mesh.setSize([(0, tag)], lc)
     geo.synchronize()
+    for r, tags in enumerate(embedded):
+        if tags:
+            gmsh.model.mesh.embed(0, tags, 2, surfaces[r])
     for c in fixed:
         gmsh.model.mesh.setTransfiniteCurve(c, 2)
     threads = mesh_threads() if nc > SMALL else 1  # a second thread's start costs more than a small mesh
@@ -330,11 +293,12 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     return RestMesh(points=pts, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
 
 
-def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line) -> None:
-    """The rest as plane surfaces between ``cuts`` (left to right, :mod:`~cvxdual.geometry.outline_cut`):
-    ``loop`` is the outer loop (``n_path`` curves of the outline, from the chain's right end round
-    to its left end, then the chain's), each curve a cut ends on is split there (in its part too),
-    a hole a cut runs through gives each side one half."""
+def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line, straight, ring) -> list:
+    """The rest as regions between ``cuts`` (left to right, :mod:`~cvxdual.geometry.outline_cut`),
+    each ``(outer loop, hole loops)``: ``loop`` is the outer loop (``n_path`` curves of the outline,
+    from the chain's right end round to its left end, then the chain's), each curve a cut ends on is
+    split there (in its part too), a hole a cut runs through gives each side one half; a cut's
+    straight stretches are ``straight(a, b)`` (lines through their size stops)."""
     def at(p) -> int:
         return point(tuple(map(float, p)))
 
@@ -363,7 +327,7 @@ def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, poi
     for c in cuts:
         k_pt, h = chain_pts[c.k], at(c.end)
         if c.hole is None:
-            d = [line(k_pt, h)]
+            d = straight(k_pt, h)
             down.append((d, d))
             continue
         cs = holes[c.hole]
@@ -374,9 +338,9 @@ def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, poi
         b = cs[i2:i1] if i2 < i1 else cs[i2:] + cs[:i1]  # far -> near
         back_b = [-t for t in reversed(b)]  # near -> far, the other way
         a_right = np.mean([shape[t][0][0][0] for t in a]) > c.end[0]
-        leg1, leg2 = line(k_pt, at(c.near)), line(at(c.far), h)
+        leg1, leg2 = straight(k_pt, at(c.near)), straight(at(c.far), h)
         left, right = (back_b, a) if a_right else (a, back_b)
-        down.append(([leg1, *left, leg2], [leg1, *right, leg2]))
+        down.append(([*leg1, *left, *leg2], [*leg1, *right, *leg2]))
 
     def up(curves):
         return [-t for t in reversed(curves)]
@@ -387,11 +351,12 @@ def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, poi
         regions.append(chain[cuts[m - 1].k:cuts[m].k] + down[m][0] + path[hit_at[m]:hit_at[m - 1]]
                        + up(down[m - 1][1]))
     regions.append(down[0][0] + path[hit_at[0]:] + chain[:cuts[0].k])  # left of the first cut
+    out = []
     for r, region in enumerate(regions):
-        ring = np.concatenate([shape[abs(t)][0][::1 if t > 0 else -1] for t in region])
-        mine = [cs for cs in rest if r == len(regions) - 1 or inside(ring, shape[cs[0]][0][0])]
+        mine = [cs for cs in rest if r == len(regions) - 1 or inside(ring(region), shape[cs[0]][0][0])]
         rest = [cs for cs in rest if cs not in mine]
-        geo.addPlaneSurface([geo.addCurveLoop(region)] + [geo.addCurveLoop(cs) for cs in mine])
+        out.append((region, mine))
+    return out
 
 
 def _virtual(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
@@ -468,7 +433,7 @@ def _free_arc(s, concave, level, point, line, virtual) -> list[int]:
     ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``)."""
     a0, sweep = s.angles()
     r = math.dist(s.start, s.center)
-    n = max(1, math.ceil(abs(sweep) / (math.pi / 2) * ARC_EDGES * 2**level - 1e-9))
+    n = arc_edges(s, level)
     d = sweep / n
     t = a0 + d * np.arange(n + 1)
     c = np.array(s.center)
