@@ -5,6 +5,7 @@ arcs, determinism of the meshes, the outline checks and the refusals of malforme
 import os
 import subprocess
 import sys
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -71,6 +72,18 @@ def test_patch_outline_mesh_is_unstructured_and_conforming(patch_outline):
     d1, d2 = mesh.points[tris[:, 1]] - mesh.points[tris[:, 0]], mesh.points[tris[:, 2]] - mesh.points[tris[:, 0]]
     area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     assert area.sum() == pytest.approx(40.0, rel=1e-12)  # the 10 x 4 block, to rounding
+
+
+def test_gmsh_time_is_reported_for_outline_scenes_only(patch_outline):
+    """``timings["gmsh"]``: gmsh's time in the whole call (size probe, warm start), within its wall
+    time; none for column scenes, none spent when every mesh is kept."""
+    forget_meshes()
+    t = time.perf_counter()
+    sol = cd.solve(patch_outline, level=3, solver="fast")
+    wall = time.perf_counter() - t
+    assert 0 < sol.timings["gmsh"] < wall
+    assert cd.solve(patch_outline, level=3, solver="fast").timings["gmsh"] == 0  # the meshes are kept
+    assert "gmsh" not in cd.solve("patch", level=0, solver="fast").timings
 
 
 @pytest.mark.parametrize(("scene", "level"), [("patch-outline", 4), ("block-with-hole", 3)])

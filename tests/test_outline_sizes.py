@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from cvxdual.geometry.mesh import build_mesh
-from cvxdual.geometry.outline_cut import inside
 from cvxdual.geometry.outline_sizes import OCTAVE, STEER, SizeField, clear_of, graded_stops, steering_points
 from cvxdual.scene import load_scene
+from cvxdual.scene.planar import inside
 
 
 def _field(scene, level, k=1):

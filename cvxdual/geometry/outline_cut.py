@@ -21,7 +21,7 @@ from itertools import pairwise
 
 import numpy as np
 
-from ..scene.outline import segments_meet
+from ..scene.planar import inside, segments_meet
 
 PIECES = 8  # surfaces a body is cut into at most: cuts tried at chain fractions 1/8 .. 7/8
 
@@ -126,16 +126,3 @@ def _of_curve(segs, poly) -> np.ndarray:
     """Which segments belong to the polyline ``poly``."""
     mine = np.stack([poly[:-1], poly[1:]], 1)
     return np.any(np.all(segs[:, None] == mine[None], axis=(-1, -2)), axis=1)
-
-
-def inside(ring: np.ndarray, p):
-    """Whether ``p`` lies inside the closed polyline ``ring`` (even-odd rule); ``p`` one point
-    ``(2,)`` (a bool) or many ``(m, 2)`` (a bool array)."""
-    q = np.asarray(p, float)
-    pts = q.reshape(-1, 1, 2)
-    a, b = ring[None], np.roll(ring, -1, axis=0)[None]
-    up = (a[..., 1] > pts[..., 1]) != (b[..., 1] > pts[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = a[..., 0] + (pts[..., 1] - a[..., 1]) / (b[..., 1] - a[..., 1]) * (b[..., 0] - a[..., 0])
-    odd = np.count_nonzero(up & (x > pts[..., 0]), axis=1) % 2 == 1
-    return bool(odd[0]) if q.ndim == 1 else odd

@@ -36,8 +36,8 @@ import numpy as np
 
 from ..errors import MeshError
 from ..scene.geo import import_gmsh
-from ..scene.outline import segments_meet
-from .outline_cut import find_cuts, inside
+from ..scene.planar import inside, segments_meet
+from .outline_cut import find_cuts
 from .outline_sizes import STRIP_ASPECT, SizeField, arc_edges, arc_size, graded_stops, steering, strip_depth
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes

@@ -22,7 +22,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .outline_cut import inside
+from ..scene.planar import inside
 
 GROWTH = 0.4  # at level 0 the size grows by 0.4 times the distance from a source; halved a level
 STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..errors import MeshError, SceneError
 from ..validate import short
-from .outline import MAX_PARTS, Outline, Part, Segment, signed_area
+from .outline import MAX_PARTS, Outline, Part, Segment
+from .planar import signed_area
 from .profiles import Flat, LowerCircle, UpperCircle
 
 TOL = 1e-9  # relative to the body's size: ends typed to the same point meet

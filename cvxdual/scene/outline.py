@@ -25,11 +25,12 @@ import numpy as np
 
 from ..errors import SceneError
 from ..validate import number, pair, short, text
+from .planar import inside, meeting_pairs, signed_area
 
 ARC_SAMPLES = 64  # points per arc when checking crossings and drawing (a chord error of 1e-4 of the radius)
 FACE_SAMPLES = 2001  # points of the face in the crossing checks
 PART_KINDS = ("line", "arc", "spline")
-MAX_PARTS = 200  # parts and holes of one body: the crossing check is quadratic in the sampled segments
+MAX_PARTS = 200  # parts and holes of one body (and points of a spline): bounds the checks' and gmsh's work
 
 
 @dataclass(frozen=True)
@@ -227,37 +228,11 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
     return Outline(tuple(parts), tuple(hs))
 
 
-def signed_area(pts: np.ndarray) -> float:
-    """The area of the closed polygon through ``pts`` ``(m, 2)``: positive counter-clockwise."""
-    return 0.5 * float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]))
-
-
 def circle(name: str, center, radius: float) -> Part:
     """A circular hole as four quarter arcs, starting at its right-most point."""
     cx, cy = center
     q = [(cx + radius, cy), (cx, cy + radius), (cx - radius, cy), (cx, cy - radius)]
     return Part(name, tuple(Segment(q[j], q[(j + 1) % 4], (cx, cy)) for j in range(4)))
-
-
-def segments_meet(a0, a1, b0, b1, tol):
-    """``(m, n)``: whether segment ``a_i`` and ``b_j`` meet (touching counts, up to ``tol``)."""
-    def cross(u, v):
-        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-    da, db = (a1 - a0)[:, None], (b1 - b0)[None]
-    o1 = cross(da, b0[None] - a0[:, None])
-    o2 = cross(da, b1[None] - a0[:, None])
-    o3 = cross(db, a0[:, None] - b0[None])
-    o4 = cross(db, a1[:, None] - b0[None])
-    la = np.linalg.norm(da, axis=-1)
-    lb = np.linalg.norm(db, axis=-1)
-    t1, t2 = tol * la, tol * lb  # orientation tests scaled to distances
-    return (o1 * o2 <= t1**2) & (o3 * o4 <= t2**2) & _boxes_meet(a0, a1, b0, b1, tol)
-
-
-def _boxes_meet(a0, a1, b0, b1, tol):
-    lo_a, hi_a = np.minimum(a0, a1)[:, None], np.maximum(a0, a1)[:, None]
-    lo_b, hi_b = np.minimum(b0, b1)[None], np.maximum(b0, b1)[None]
-    return np.all((lo_a <= hi_b + tol) & (lo_b <= hi_a + tol), axis=-1)
 
 
 def _loop_polyline(face_pts: np.ndarray, outline: Outline):
@@ -311,26 +286,22 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
         side = "above" if position == "upper" else "below"
         raise SceneError(f"body {short(body)}: the outline does not enclose a region {side} the face (a {position} "
                          "body); start at the face's right end and go round the body back to its left end")
-    from matplotlib.path import Path  # the point-in-polygon test of the hole check
-
-    ring_path = Path(ring)
     for h in outline.holes:
         pts = np.concatenate([s.sample() for s in h.segments])
-        if not np.all(ring_path.contains_points(pts)):
+        if not np.all(inside(ring, pts)):
             raise SceneError(f"body {short(body)}: hole {h.name!r} is not inside the body; move it inside the outline")
 
 
 def _check_crossings(chains, tol, body) -> None:
-    """No two segments of the sampled outline meet, but neighbours at their shared end. Blocks of
-    rows against all segments keep the memory at ``block x n``; only the meeting pairs are kept."""
-    from scipy.spatial import cKDTree
-
+    """No two segments of the sampled outline meet, but neighbours at their shared end (the first
+    offending pair in index order is named)."""
     segs, owner, idx = [], [], []
     for k, (pts, name) in enumerate(chains):
         segs.append(np.stack([pts[:-1], pts[1:]], 1))
         owner += [name] * (len(pts) - 1)
         idx.append(np.full(len(pts) - 1, k))
     S = np.concatenate(segs)
+    n = len(S)
     chain = np.concatenate(idx)
     pos = np.concatenate([np.arange(len(s)) for s in segs])
     # chain ends that coincide (a part's end and the next part's start): their end segments may touch
@@ -338,21 +309,17 @@ def _check_crossings(chains, tol, body) -> None:
     last = first + np.array([len(s) for s in segs]) - 1
     end_pts = np.concatenate([[c[0] for c, _ in chains], [c[-1] for c, _ in chains]])
     end_seg = np.concatenate([first, last])
-    shared = np.array(sorted(cKDTree(end_pts).query_pairs(tol)), int).reshape(-1, 2)
-    ok_a, ok_b = end_seg[shared[:, 0]], end_seg[shared[:, 1]]
-    ok = set(zip(np.minimum(ok_a, ok_b).tolist(), np.maximum(ok_a, ok_b).tolist(), strict=True))
-    n, block = len(S), 512
-    for i in range(0, n, block):
-        hit = segments_meet(S[i:i + block, 0], S[i:i + block, 1], S[:, 0], S[:, 1], tol)
-        r = np.arange(i, min(i + block, n))[:, None]
-        hit &= np.arange(n)[None, :] > r  # each pair once
-        hit &= ~((chain[r] == chain[None, :]) & (np.abs(pos[r] - pos[None, :]) <= 1))  # samples of one part
-        for u, v in zip(*np.nonzero(hit), strict=True):
-            a, b = int(r[u, 0]), int(v)
-            if (a, b) in ok:
-                continue
-            what = (f"part {owner[a]!r} crosses itself" if owner[a] == owner[b] else
-                    f"parts {owner[a]!r} and {owner[b]!r} cross or touch")
-            where = S[a].mean(0)
-            raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
-                             f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")
+    u, v = np.nonzero(np.triu(np.hypot(*(end_pts[:, None] - end_pts[None]).T) <= tol, 1))
+    ok = np.minimum(end_seg[u], end_seg[v]) * n + np.maximum(end_seg[u], end_seg[v])
+    pairs = meeting_pairs(S, tol)
+    a, b = pairs[:, 0], pairs[:, 1]
+    ends_ok = np.isin(a * n + b, ok)
+    neighbours = (chain[a] == chain[b]) & (np.abs(pos[a] - pos[b]) <= 1)  # samples of one part
+    bad = np.flatnonzero(~ends_ok & ~neighbours)
+    if len(bad):
+        a, b = int(a[bad[0]]), int(b[bad[0]])
+        what = (f"part {owner[a]!r} crosses itself" if owner[a] == owner[b] else
+                f"parts {owner[a]!r} and {owner[b]!r} cross or touch")
+        where = S[a].mean(0)
+        raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
+                         f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")
