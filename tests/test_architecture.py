@@ -33,6 +33,7 @@ LAYERS = [
     {"outputs"},
     {"study"},
     {"cli"},
+    {"__main__"},  # python -m cvxdual
 ]
 RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 

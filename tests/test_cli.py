@@ -1,6 +1,8 @@
 """The command line: `cvxdual scenes`, `cvxdual solve`, outputs and bad input."""
 
 import json
+import subprocess
+import sys
 
 import meshio
 import numpy as np
@@ -22,6 +24,12 @@ def test_scenes_lists_builtins(capsys):
     for name in ("patch", "hertz", "blocks"):
         assert name in out
     assert len(out.strip().splitlines()) == len(builtin_names())
+
+
+def test_python_dash_m_runs_the_command_line():
+    """``python -m cvxdual`` is the ``cvxdual`` script (the speed study starts runs with it)."""
+    out = subprocess.run([sys.executable, "-m", "cvxdual", "scenes"], capture_output=True, text=True, check=True)
+    assert set(builtin_names()) <= {line.split()[0] for line in out.stdout.splitlines() if line.strip()}
 
 
 def test_solve_writes_the_output_contract(tmp_path, capsys):

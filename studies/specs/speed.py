@@ -153,7 +153,8 @@ def _meshing(case, sol) -> dict:
     """The case's run again from the scene, meshing afresh, with gmsh on one thread and on two
     (the rest of the run keeps the case's one thread): gmsh's wall time (the size estimate's
     probe and the warm start's coarse meshes included) and the run's (solve and write the default
-    outputs, no figures)."""
+    outputs, no figures); then the run as a user starts it, ``cvxdual solve`` in a fresh process
+    on the machine's threads (:func:`_cli_run`)."""
     import os
     import tempfile
     from pathlib import Path
@@ -176,7 +177,29 @@ def _meshing(case, sol) -> dict:
             os.environ.pop("OMP_NUM_THREADS", None)
         else:
             os.environ["OMP_NUM_THREADS"] = before
-    return out
+    return {**out, **_cli_run(case)}
+
+
+def _cli_run(case) -> dict:
+    """``cvxdual solve`` of the case from process start to exit (imports, the scene's checks,
+    meshing, the solve, the default outputs), with the machine's threads (two): its wall time and
+    gmsh's, from ``summary.json``."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}  # the user's defaults
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "cvxdual", "solve", "--scene", case.scene_source, "--level",
+                        str(case.level), "--solver", case.solver, "--triangulation", case.triangulation,
+                        "--out", str(Path(d) / "out"), "--quiet"], check=True, env=env, capture_output=True)
+        wall = time.perf_counter() - t0
+        gmsh = json.loads((Path(d) / "out" / "summary.json").read_text())["timings"]["gmsh"]
+    return {"t_cli": wall, "t_cli_gmsh": gmsh}
 
 
 def _eq_rules(sol) -> dict:
@@ -468,23 +491,29 @@ def _eq_target(eq: pd.DataFrame) -> list[dict]:
 def _meshing_table(mesh: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for r in mesh[_ok(mesh)].itertuples():
-        for threads in (1, 2):
-            run, gm = getattr(r, f"t_run_gmsh{threads}", np.nan), getattr(r, f"t_gmsh{threads}", np.nan)
+        runs = [(f"in-process, gmsh on {n} thread{'s' * (n > 1)}", getattr(r, f"t_run_gmsh{n}", np.nan),
+                 getattr(r, f"t_gmsh{n}", np.nan)) for n in (1, 2)]
+        runs.append(("cvxdual solve, start to exit", getattr(r, "t_cli", np.nan), getattr(r, "t_cli_gmsh", np.nan)))
+        for run, total, gm in runs:
             rows.append({"scene": r.scene, "level": r.level, "path": r.path, "pieces": r.n_pieces,
-                         "gmsh threads": threads, "gmsh s": gm, "run s": run, "gmsh share": gm / run})
+                         "run": run, "gmsh s": gm, "run s": total, "gmsh share": gm / total})
     return pd.DataFrame(rows)
 
 
 def _meshing_target(mesh: pd.DataFrame) -> list[dict]:
     t = _meshing_table(mesh)
-    t = t[(t["gmsh threads"] == 2) & t.pieces.between(*NEAR)] if len(t) else t
     if not len(t):
         return []
-    return [{"target": f"outline bodies: gmsh's share of an end-to-end run at {NEAR[0]:.0e} to {NEAR[1]:.0e} pieces <= "
-                       f"{MESHING_SHARE:.0%} (gmsh on two threads)",
-             "measured": ", ".join(f"{r['gmsh share']:.0%} ({r.scene} {r.path}, {int(r.pieces)} pieces)"
-                                   for _, r in t.iterrows()),
-             "met": "yes" if t["gmsh share"].max() <= MESHING_SHARE else "no"}]
+    t = t[t.pieces.between(*NEAR)]
+    cli, inside = t[t.run.str.startswith("cvxdual")], t[t.run.str.endswith("2 threads")]
+
+    def shares(d):
+        return ", ".join(f"{r['gmsh share']:.0%} ({r.scene} {r.path}, {int(r.pieces)} pieces)" for _, r in d.iterrows())
+
+    return [{"target": f"outline bodies: gmsh's share of an end-to-end run (`cvxdual solve`, start to exit) at "
+                       f"{NEAR[0]:.0e} to {NEAR[1]:.0e} pieces <= {MESHING_SHARE:.0%}",
+             "measured": shares(cli) + f"; in-process (solve and write only, gmsh on two threads): {shares(inside)}",
+             "met": "yes" if len(cli) and cli["gmsh share"].max() <= MESHING_SHARE else "no"}]
 
 
 def _meshing_lines(mesh: pd.DataFrame) -> list[str]:
@@ -495,10 +524,12 @@ def _meshing_lines(mesh: pd.DataFrame) -> list[str]:
             "Outline bodies are meshed by gmsh beyond the strip of columns along the face, as up to eight surfaces "
             "(cuts from the strip, through a hole in the way) meshed side by side when gmsh has two threads, the "
             "size field handed to gmsh at stops along the cuts and on rings round arcs. "
-            "Each run is repeated in the case's process from the scene, meshing afresh: `gmsh s` is gmsh's wall "
-            "time in it (the size estimate's probe mesh and the fast path's coarse warm-start meshes included), "
-            "`run s` the whole run (solve and write the default outputs, no figures); gmsh on one thread, then on "
-            "two, the rest of the run on one.", "",
+            "Each run is repeated in the case's process from the scene, meshing afresh (`in-process`): `gmsh s` is "
+            "gmsh's wall time in it (the size estimate's probe mesh and the fast path's coarse warm-start meshes "
+            "included), `run s` the solve and the default outputs (no figures, no process start, no scene checks); "
+            "gmsh on one thread, then on two, the rest of the run on one. Then the same run as a user starts it "
+            "(`cvxdual solve`, a fresh process on the machine's two threads, from start to exit: imports, the "
+            "scene's checks, meshing, solve, default outputs), gmsh's time read from its `summary.json`.", "",
             md_table(_meshing_table(mesh)), ""]
 
 
