@@ -37,8 +37,8 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         f"{s['n_stress_unknowns']} stress unknowns, {s['n_dofs']} dofs, {s['n_contact_pairs']} contact pairs",
         f"solver {s['solver']}: {s['status']}, iterations {s['iterations']}; time {t['total']:.2f} s "
         f"(mesh {t['mesh']:.2f}, assemble {t['assemble']:.2f}, build {t['build']:.2f}, "
-        f"solve {t['solve']:.2f}, recover {t['recover']:.2f}"
-        + ")" + (f"; gmsh {t['gmsh']:.2f} s (its size probe and warm start included)" if "gmsh" in t else ""),
+        f"solve {t['solve']:.2f}, recover {t['recover']:.2f})"
+        + (f"; gmsh {t['gmsh']:.2f} s (its size probe and warm start included)" if "gmsh" in t else ""),
         f"contact: {c['n_active']} active pairs, x in [{_fmt(c['x_min'])}, {_fmt(c['x_max'])}] {L}, "
         f"max pressure {_fmt(c['max_pressure'])} {S}, total force {_fmt(c['total_force'])} {S}*{L}",
         (f"residuals: equilibrium {r['equilibrium']:.1e}, constitutive {r['constitutive']:.1e}, "

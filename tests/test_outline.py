@@ -2,6 +2,7 @@
 exactness of both stress spaces on unstructured meshes, Kirsch's hole, the certified bounds with free
 arcs, determinism of the meshes, the outline checks and the refusals of malformed outlines."""
 
+import math
 import os
 import subprocess
 import sys
@@ -20,7 +21,7 @@ from cvxdual.geometry.boundary import supported
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
 from cvxdual.geometry.triangulation import discretize
-from cvxdual.scene import load_scene
+from cvxdual.scene import load_scene, parse_assignment
 
 PATCH = """base = "patch"
 name = "patch-outline"
@@ -427,14 +428,29 @@ def test_geo_splines_become_spline_parts(tmp_path):
     assert len(mesh.bodies[1].side_nodes("bottom")) > 2
 
 
+def test_set_changes_one_item_of_an_outline_list():
+    """``--set`` reaches into outline lists by index (from 0): one hole's radius, the ends of two
+    parts; the rest of each list and item stays. An index past the end is one line."""
+    s = load_scene("block-with-hole", [parse_assignment("bodies.bottom.holes.0.radius=1.0"),
+                                       parse_assignment("bodies.bottom.outline.0.to=[10.0, -24.0]"),
+                                       parse_assignment("bodies.bottom.outline.1.to=[-10.0, -24.0]")])
+    bottom = next(b for b in s.bodies if b.name == "bottom").outline
+    hole = bottom.holes[0].segments[0]
+    assert hole.center == (0.0, -10.0) and math.dist(hole.start, hole.center) == 1.0
+    assert [p.name for p in bottom.path] == ["right", "bottom", "left"]
+    assert [p.segments[0].end for p in bottom.path] == [(10.0, -24.0), (-10.0, -24.0), (-10.0, 0.0)]
+    with pytest.raises(cd.errors.SceneError, match="cannot change item '1' of 'holes'") as e:
+        load_scene("block-with-hole", [parse_assignment("bodies.bottom.holes.1.radius=1.0")])
+    assert "\n" not in str(e.value) and "numbered from 0" in str(e.value)
+
+
 def test_study_grid_over_an_outline(client, tmp_path):
-    """A study's ``set`` grid replaces an outline list whole (here the hole: two radii), as
-    ``--set`` does: each case runs on its own mesh, both certified."""
+    """A study's ``set`` grid over a number inside an outline list (here the hole's radius, by its
+    index), as ``--set`` does: each case runs on its own mesh, both certified."""
     from cvxdual.study.runner import run
-    hole = '{{ name = "hole", center = [0.0, -10.0], radius = {r} }}'
     (tmp_path / "g.toml").write_text(
         'name = "g"\nscenes = ["block-with-hole"]\nlevels = [1]\nsolvers = ["fast"]\nstress_spaces = ["eq"]\n'
-        f'reference = "none"\n[set]\n"bodies.bottom.holes" = [[{hole.format(r=0.5)}], [{hole.format(r=1.0)}]]\n')
+        'reference = "none"\n[set]\n"bodies.bottom.holes.0.radius" = [0.5, 1.0]\n')
     df = run(str(tmp_path / "g.toml"), tmp_path / "out", client=client, cache=tmp_path / "cache", quiet=True)
     assert len(df) == 2 and (df.status == "optimal").all() and df.guaranteed.astype(bool).all()
     assert df.n_pieces.nunique() == 2  # two meshes

@@ -80,8 +80,23 @@ def merge(base: dict, over: dict) -> dict:
             out[k] = {**{key: b[key] for key in ("on", "interval") if key in b}, **copy.deepcopy(v)}
         elif isinstance(v, dict) and isinstance(b, dict) and not _replaces(b, v):
             out[k] = merge(b, v)
+        elif isinstance(v, dict) and isinstance(b, list) and v and all(str(i).isdigit() for i in v):
+            out[k] = _merge_items(b, v, k)
         else:
             out[k] = copy.deepcopy(v)
+    return out
+
+
+def _merge_items(items: list, over: dict, key: str) -> list:
+    """Items of a list changed by their index (``--set bodies.bottom.holes.0.radius=1``): a table
+    item merges as a table, anything else is replaced."""
+    out = copy.deepcopy(items)
+    for i, v in over.items():
+        j = int(i) if len(str(i)) < 10 else len(out)  # a hostile index: past the end, not a huge int
+        if j >= len(out):
+            raise SceneError(f"cannot change item {short(str(i))} of {short(key)}: it has {len(out)} item(s), "
+                             "numbered from 0")
+        out[j] = merge(out[j], v) if isinstance(v, dict) and isinstance(out[j], dict) else copy.deepcopy(v)
     return out
 
 
