@@ -115,7 +115,7 @@ def _probe_rest(scene: Scene, body: Body, level: int, cols: float, extra) -> flo
     """gmsh's triangles beyond the strip of an outline body at ``level``, estimated without
     meshing at that level: meshed at the highest level with at most :data:`PROBE_COLUMNS`
     columns, times 4 per level above it (every size halves per level, so the count grows by
-    about 4: 2.8-4.1 measured; the estimate is 0.97-1.5 times the count, reports/outlines.md)."""
+    about 4: 3.0-4.1 measured; the estimate is 1.0-1.9 times the count, reports/outlines.md)."""
     probe = level - max(0, math.ceil(math.log2(max(cols, 1.0) / PROBE_COLUMNS)))
     probe = max(probe, 0)
     c = column_abscissae(scene, probe, extra)

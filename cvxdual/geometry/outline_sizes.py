@@ -44,8 +44,9 @@ def arc_size(seg, level: int) -> float:
 
 
 def arc_edges(seg, level: int) -> int:
-    """Edges of an arc's polygon: ``ARC_EDGES * 2**level`` a quarter turn, at least one."""
-    return max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES * 2**level - 1e-9))
+    """Edges of an arc's polygon: ``ARC_EDGES`` a quarter turn at level 0 (at least one), doubled
+    a level, so that each level's polygon halves every edge of the last (:mod:`~cvxdual.geometry.refine`)."""
+    return max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES - 1e-9)) * 2**level
 
 
 @dataclass(frozen=True)

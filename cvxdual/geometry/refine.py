@@ -1,0 +1,96 @@
+"""Uniform refinement of a triangle mesh: every edge halved, every triangle cut into four similar
+ones, with the new node of chosen edges moved onto the true boundary and chosen edges left whole.
+
+An outline body's gmsh part at level ``L >= 1`` is gmsh's mesh at the sizes of level ``L - 1``
+refined once (:mod:`~cvxdual.geometry.outline_mesh`): the size field halves everywhere a level
+(:mod:`~cvxdual.geometry.outline_sizes`), so the refined mesh has the sizes of level ``L`` and
+gmsh makes a quarter of the triangles. A triangle with one edge left whole (the strip's sides,
+which the strip's own mesh does not split) is cut into three instead: the corner between the
+halved edges, and the rest along the shorter diagonal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import MeshError
+
+
+def _keys(a, b, n: int) -> np.ndarray:
+    """One integer per undirected edge ``(a, b)`` of a mesh with ``n`` nodes."""
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    return np.minimum(a, b) * n + np.maximum(a, b)
+
+
+@dataclass(frozen=True)
+class Refined:
+    """The refined mesh: ``points`` (the old nodes first, in their order, then one new node per
+    halved edge), ``triangles`` (orientation kept) and the halved edges' keys and new nodes, for
+    :meth:`midpoints`."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    n_old: int
+    edge_keys: np.ndarray  # sorted
+    edge_mid: np.ndarray  # the new node of each edge, -1 for an edge left whole
+
+    def midpoints(self, a, b) -> np.ndarray:
+        """The new node on each old edge ``(a[i], b[i])`` (-1 if it was left whole)."""
+        k = _keys(a, b, self.n_old)
+        pos = np.clip(np.searchsorted(self.edge_keys, k), 0, len(self.edge_keys) - 1)
+        if len(k) and not np.array_equal(self.edge_keys[pos], k):
+            raise MeshError("internal: an edge asked of the refined mesh is not one of its edges")
+        return self.edge_mid[pos]
+
+    def chain(self, nodes) -> np.ndarray:
+        """A path of old nodes with the new node of each of its edges between its ends."""
+        nodes = np.asarray(nodes, np.int64)
+        if len(nodes) < 2:
+            return nodes
+        mid = self.midpoints(nodes[:-1], nodes[1:])
+        out = np.stack([nodes[:-1], mid], 1).ravel()
+        return np.append(out[out >= 0], nodes[-1])
+
+
+def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to=None) -> Refined:
+    """Halve every edge of ``triangles`` (on ``points`` ``(n, 2)``) except the edges ``whole``
+    ``(w, 2)``; the new node of edge ``moved[i]`` ``(q, 2)`` lies at ``to[i]`` instead of the
+    edge's midpoint. Triangles with every edge halved give four, with one edge whole three; a
+    triangle with two or three whole edges is refused (no outline mesh has one)."""
+    points = np.asarray(points, float)
+    tri = np.asarray(triangles, np.int64)
+    n = len(points)
+    e = np.stack([tri, np.roll(tri, -1, axis=1)], -1)  # (m, 3, 2): edge j runs from corner j to j + 1
+    keys, inv = np.unique(_keys(e[..., 0], e[..., 1], n), return_inverse=True)
+    inv = inv.reshape(tri.shape)
+    split = np.ones(len(keys), bool)
+    if whole is not None and len(whole):
+        w = np.asarray(whole, np.int64).reshape(-1, 2)
+        split[np.searchsorted(keys, _keys(w[:, 0], w[:, 1], n))] = False
+    a, b = keys // n, keys % n
+    xy = 0.5 * (points[a] + points[b])
+    if moved is not None and len(moved):
+        q = np.asarray(moved, np.int64).reshape(-1, 2)
+        xy[np.searchsorted(keys, _keys(q[:, 0], q[:, 1], n))] = np.asarray(to, float).reshape(-1, 2)
+    mid = np.full(len(keys), -1, np.int64)
+    mid[split] = n + np.arange(int(split.sum()))
+    m = mid[inv]  # (m, 3): the new node on edge j of each triangle
+    n_whole = np.sum(m < 0, axis=1)
+    if np.any(n_whole > 1):
+        raise MeshError("internal: a triangle to refine has two edges that must stay whole")
+    v0, v1, v2 = tri.T
+    m0, m1, m2 = m.T
+    four = n_whole == 0
+    out = [np.stack(c, 1)[four] for c in ((v0, m0, m2), (m0, v1, m1), (m2, m1, v2), (m0, m1, m2))]
+    # one edge whole: turn each such triangle so that it is edge 2 (v2 -> v0), then cut in three
+    three = np.flatnonzero(n_whole == 1)
+    r = np.argmax(m[three] < 0, axis=1)  # which edge is whole
+    turn = (np.arange(3)[None, :] + (r[:, None] + 1)) % 3  # corners so that the whole edge is 2
+    t3, m3 = np.take_along_axis(tri[three], turn, 1), np.take_along_axis(m[three], turn, 1)
+    a0, a1, a2 = t3.T
+    b0, b1 = m3[:, 0], m3[:, 1]
+    out += [np.stack(c, 1) for c in ((b0, a1, b1), (a0, b0, b1), (a0, b1, a2))]
+    return Refined(points=np.concatenate([points, xy[split]]), triangles=np.concatenate(out),
+                   n_old=n, edge_keys=keys, edge_mid=mid)

@@ -1,0 +1,71 @@
+"""Uniform refinement (cvxdual.geometry.refine): four similar triangles from each, the same
+region, a conforming mesh, chosen new nodes moved, chosen edges kept whole, paths refined."""
+
+import numpy as np
+import pytest
+
+from cvxdual.errors import MeshError
+from cvxdual.geometry.refine import refine
+
+
+def _square(n=3):
+    """A structured mesh of the unit square: ``n * n`` cells, two triangles each (counter-clockwise)."""
+    x = np.linspace(0.0, 1.0, n + 1)
+    p = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    b, c, d = a + (n + 1), a + (n + 2), a + 1
+    return p, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def _areas(p, t):
+    d1, d2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
+    return 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+
+
+def _edge_uses(t):
+    e = np.sort(np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return counts
+
+
+def test_four_similar_children_cover_the_parent():
+    """Every triangle gives four of a quarter its area, counter-clockwise; nodes: the old ones
+    first, then one per edge; interior edges are shared by two triangles, boundary edges by one
+    (a hanging node would leave an edge used once inside). Areas to rounding (1e-15 of 1)."""
+    p, t = _square()
+    r = refine(p, t)
+    assert len(r.triangles) == 4 * len(t)
+    assert np.array_equal(r.points[:len(p)], p)
+    n_edges = len(np.unique(np.sort(np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2), axis=1), axis=0))
+    assert len(r.points) == len(p) + n_edges
+    a = _areas(r.points, r.triangles)
+    assert np.all(a > 0) and a.sum() == pytest.approx(1.0, abs=1e-15)
+    assert np.allclose(np.sort(a), 1.0 / (2 * 9 * 4))  # all similar to their parents: one area here
+    counts = _edge_uses(r.triangles)
+    assert set(counts) == {1, 2} and (counts == 1).sum() == 2 * 4 * 3  # the boundary: 12 edges, halved
+
+
+def test_whole_edges_are_not_split_and_moved_nodes_sit_where_asked():
+    """An edge kept whole stays an edge (its triangle cut in three, no node on it); a moved new
+    node sits exactly at its target, and the path through it is refined through that node."""
+    p, t = _square(2)
+    whole = np.array([[0, 3]])  # the bottom side's left half: (0, 0) - (0.5, 0)
+    moved, to = np.array([[2, 5]]), np.array([[0.25, 1.05]])  # the top side's left half, pushed out
+    r = refine(p, t, whole, moved, to)
+    assert len(r.triangles) == 4 * len(t) - 1
+    assert r.midpoints([0], [3])[0] == -1 and r.midpoints([3], [0])[0] == -1
+    m = r.midpoints([5], [2])[0]
+    assert np.array_equal(r.points[m], [0.25, 1.05])
+    assert np.array_equal(r.chain([2, 5, 8]), [2, m, 5, r.midpoints([5], [8])[0], 8])
+    assert np.all(_areas(r.points, r.triangles) > 0)
+    # the region grew by the triangle under the pushed-out node: 0.5 * 0.5 * 0.05
+    assert _areas(r.points, r.triangles).sum() == pytest.approx(1.0 + 0.5 * 0.5 * 0.05, abs=1e-15)
+    e = np.sort(np.stack([r.triangles, np.roll(r.triangles, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    assert any((e == [0, 3]).all(axis=1))  # still one edge of the refined mesh
+
+
+def test_a_triangle_with_two_whole_edges_is_refused():
+    p, t = _square(1)
+    with pytest.raises(MeshError, match="two edges"):
+        refine(p, t, whole=np.array([[0, 1], [1, 3]]))
