@@ -69,3 +69,12 @@ def test_a_triangle_with_two_whole_edges_is_refused():
     p, t = _square(1)
     with pytest.raises(MeshError, match="two edges"):
         refine(p, t, whole=np.array([[0, 1], [1, 3]]))
+
+
+def test_a_node_moved_across_its_triangle_is_refused():
+    """Moving the top side's new node below the cell's diagonal folds a child over: refused in
+    one line, not returned as a mesh with a triangle turned inside out."""
+    p, t = _square(1)
+    with pytest.raises(MeshError, match="folds a triangle over") as e:
+        refine(p, t, moved=np.array([[1, 3]]), to=np.array([[0.5, 0.2]]))
+    assert "\n" not in str(e.value)

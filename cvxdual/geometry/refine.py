@@ -6,7 +6,7 @@ refined once (:mod:`~cvxdual.geometry.outline_mesh`): the size field halves ever
 (:mod:`~cvxdual.geometry.outline_sizes`), so the refined mesh has the sizes of level ``L`` and
 gmsh makes a quarter of the triangles. A triangle with one edge left whole (the strip's sides,
 which the strip's own mesh does not split) is cut into three instead: the corner between the
-halved edges, and the rest along the shorter diagonal.
+halved edges, and the rest from the whole edge's first end.
 """
 
 from __future__ import annotations
@@ -92,5 +92,16 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     a0, a1, a2 = t3.T
     b0, b1 = m3[:, 0], m3[:, 1]
     out += [np.stack(c, 1) for c in ((b0, a1, b1), (a0, b0, b1), (a0, b1, a2))]
-    return Refined(points=np.concatenate([points, xy[split]]), triangles=np.concatenate(out),
-                   n_old=n, edge_keys=keys, edge_mid=mid)
+    new, children = np.concatenate([points, xy[split]]), np.concatenate(out)
+    # a moved node must not fold a triangle over: every child keeps its parent's orientation
+    parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3)
+    if np.any(np.sign(_area2(new, children)) != np.sign(_area2(points, tri[parent]))):
+        raise MeshError("refining the mesh folds a triangle over (a node placed on a curved part or on the strip "
+                        "crosses it); raise the level, or move the part away from the others")
+    return Refined(points=new, triangles=children, n_old=n, edge_keys=keys, edge_mid=mid)
+
+
+def _area2(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Twice the signed area of each triangle: positive counter-clockwise."""
+    d1, d2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
+    return d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
