@@ -21,7 +21,7 @@ each fixed polygon (a free arc's, a spline's) as two-node lines, and refinement 
 nodes on them (a hole's tangent corners on its chords, the arcs' vertices on the circle), so
 the refined mesh conforms to the strip of level ``L`` and keeps every polygon of level ``L``;
 the strip's sides stay whole. gmsh makes a quarter of the triangles: 0.22 s instead of 0.73 s
-for block-with-hole's lower body at level 4 (84k triangles).
+for block-with-hole's lower body at level 4 (86k triangles).
 
 Where cuts from nodes of the chain reach a straight part of the outline
 (:mod:`~cvxdual.geometry.outline_cut`, through a hole in the way), the rest is meshed as up to
