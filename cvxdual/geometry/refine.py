@@ -6,7 +6,7 @@ refined once (:mod:`~cvxdual.geometry.outline_mesh`): the size field halves ever
 (:mod:`~cvxdual.geometry.outline_sizes`), so the refined mesh has the sizes of level ``L`` and
 gmsh makes a quarter of the triangles. A triangle with one edge left whole (the strip's sides,
 which the strip's own mesh does not split) is cut into three instead: the corner between the
-halved edges, and the rest from the whole edge's first end.
+halved edges, and the rest along the shorter diagonal.
 """
 
 from __future__ import annotations
@@ -91,8 +91,12 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     t3, m3 = np.take_along_axis(tri[three], turn, 1), np.take_along_axis(m[three], turn, 1)
     a0, a1, a2 = t3.T
     b0, b1 = m3[:, 0], m3[:, 1]
-    out += [np.stack(c, 1) for c in ((b0, a1, b1), (a0, b0, b1), (a0, b1, a2))]
-    new, children = np.concatenate([points, xy[split]]), np.concatenate(out)
+    new = np.concatenate([points, xy[split]])
+    # the quadrilateral a0 b0 b1 a2 is cut along its shorter diagonal
+    short = (np.linalg.norm(new[a0] - new[b1], axis=1) <= np.linalg.norm(new[b0] - new[a2], axis=1))[:, None]
+    out += [np.stack([b0, a1, b1], 1), np.where(short, np.stack([a0, b0, b1], 1), np.stack([a0, b0, a2], 1)),
+            np.where(short, np.stack([a0, b1, a2], 1), np.stack([b0, b1, a2], 1))]
+    children = np.concatenate(out)
     # a moved node must not fold a triangle over: every child keeps its parent's orientation
     parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3)
     if np.any(np.sign(_area2(new, children)) != np.sign(_area2(points, tri[parent]))):
