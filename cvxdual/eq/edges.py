@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshError
+from ..geometry.triangles import edge_keys
 from .element import unit
 
 
@@ -15,7 +16,7 @@ def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
     edge ``j`` runs ``X_j -> X_{j+1}``), whether it runs ``hi -> lo`` (``flip``) and the owner
     ``(t, j)`` of every edge that has one triangle (the boundary)."""
     a, b = tri, np.roll(tri, -1, axis=1)
-    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+    keys = edge_keys(a, b, n_nodes)
     uniq, inv, count = np.unique(keys.ravel(), return_inverse=True, return_counts=True)
     lo, hi = uniq // n_nodes, uniq % n_nodes
     d = pts[hi] - pts[lo]
@@ -25,10 +26,6 @@ def mesh_edges(tri: np.ndarray, pts: np.ndarray, n_nodes: int) -> dict:
     owner[inv, 0], owner[inv, 1] = np.repeat(np.arange(len(tri)), 3), np.tile(np.arange(3), len(tri))
     return {"keys": uniq, "lo": lo, "hi": hi, "ng": ng, "id": inv.reshape(tri.shape), "flip": a > b,
             "count": count, "boundary": bnd, "owner": owner, "length": np.linalg.norm(d, axis=1)}
-
-
-def edge_keys(a: np.ndarray, b: np.ndarray, n_nodes: int) -> np.ndarray:
-    return np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
 
 
 def edge_ids(edges: dict, a: np.ndarray, b: np.ndarray, n_nodes: int, missing: bool = False) -> np.ndarray:

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from .outline_sizes import arc_edges, arc_size
+from .triangles import doubled_areas, edge_keys
 
 
 def match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -68,17 +69,14 @@ def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarra
     if not len(corner) + len(chord):
         return np.zeros((0, 3), int), np.zeros(0)
     c_nodes = idx[match_rows(corner.reshape(-1, 2), xy)].reshape(-1, 3)
-    p = allp[c_nodes]
-    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    c_area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    c_area = 0.5 * np.abs(doubled_areas(allp, c_nodes))
     # the triangle on each chord: its edge key among the edges of the triangles at the chords' ends
     n = int(tris.max()) + 1
     ends = np.sort(idx[match_rows(chord.reshape(-1, 2), xy)].reshape(-1, 2), axis=1)
     near = np.flatnonzero(np.isin(tris, ends).any(axis=1))
-    key = np.array([n, 1])
-    keys = np.sort(np.stack([tris[near], np.roll(tris[near], -1, axis=1)], -1).reshape(-1, 2), axis=1) @ key
+    keys = edge_keys(tris[near], np.roll(tris[near], -1, axis=1), n).ravel()  # edge j of triangle i at 3 i + j
     order = np.argsort(keys)
-    t = near[order[np.searchsorted(keys[order], ends @ key)] // 3]
+    t = near[order[np.searchsorted(keys[order], edge_keys(ends[:, 0], ends[:, 1], n))] // 3]
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
 

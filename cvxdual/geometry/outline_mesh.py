@@ -49,6 +49,7 @@ from .outline_arcs import continuation, free_arc, gmsh_arc, match_rows
 from .outline_cut import find_cuts
 from .outline_sizes import STRIP_ASPECT, SizeField, graded_stops, steering, strip_depth
 from .refine import refine
+from .triangles import doubled_areas
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
@@ -315,8 +316,7 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     tris = idx[tris]
     allp = np.concatenate([np.zeros((2 * nc, 2)), xy[new]])
     allp[idx[~new]] = xy[~new]
-    d1, d2 = allp[tris[:, 1]] - allp[tris[:, 0]], allp[tris[:, 2]] - allp[tris[:, 0]]
-    cw = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] < 0
+    cw = doubled_areas(allp, tris) < 0
     tris[cw] = tris[cw][:, ::-1]  # counter-clockwise, as every triangle of the package
     parts = {}
     for name, curves in part_curves.items():
@@ -348,7 +348,7 @@ def _refined(xy, tris, curve_nodes, mids, arc_of, shape):
         moved += list(zip(ns[:-1], ns[1:], strict=True))
         to += list(centre + r * mid / np.linalg.norm(mid, axis=1)[:, None])
     ref = refine(xy, tris, whole, moved, to)
-    return ref.points, ref.triangles, {c: ref.chain(ns) for c, ns in curve_nodes.items()}
+    return ref.points, ref.triangles, ref.chains(curve_nodes)
 
 
 def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, point, line, straight, ring) -> list:

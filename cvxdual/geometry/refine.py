@@ -16,12 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MeshError
-
-
-def _keys(a, b, n: int) -> np.ndarray:
-    """One integer per undirected edge ``(a, b)`` of a mesh with ``n`` nodes."""
-    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
-    return np.minimum(a, b) * n + np.maximum(a, b)
+from .triangles import doubled_areas, edge_keys
 
 
 @dataclass(frozen=True)
@@ -38,7 +33,7 @@ class Refined:
 
     def midpoints(self, a, b) -> np.ndarray:
         """The new node on each old edge ``(a[i], b[i])`` (-1 if it was left whole)."""
-        k = _keys(a, b, self.n_old)
+        k = edge_keys(a, b, self.n_old)
         pos = np.clip(np.searchsorted(self.edge_keys, k), 0, len(self.edge_keys) - 1)
         if len(k) and not np.array_equal(self.edge_keys[pos], k):
             raise MeshError("internal: an edge asked of the refined mesh is not one of its edges")
@@ -46,12 +41,19 @@ class Refined:
 
     def chain(self, nodes) -> np.ndarray:
         """A path of old nodes with the new node of each of its edges between its ends."""
-        nodes = np.asarray(nodes, np.int64)
-        if len(nodes) < 2:
-            return nodes
-        mid = self.midpoints(nodes[:-1], nodes[1:])
-        out = np.stack([nodes[:-1], mid], 1).ravel()
-        return np.append(out[out >= 0], nodes[-1])
+        return self.chains({0: nodes})[0]
+
+    def chains(self, paths: dict) -> dict:
+        """:meth:`chain` of every path of ``paths`` (any keys), with one lookup for all their edges."""
+        paths = {k: np.asarray(v, np.int64) for k, v in paths.items()}
+        mid = self.midpoints(*(np.concatenate([np.zeros(0, np.int64)] + [p[s] for p in paths.values()])
+                               for s in (slice(None, -1), slice(1, None))))
+        out, at = {}, 0
+        for k, p in paths.items():
+            seq = np.stack([p[:-1], mid[at:at + max(len(p) - 1, 0)]], 1).ravel()
+            at += max(len(p) - 1, 0)
+            out[k] = np.append(seq[seq >= 0], p[-1:])
+        return out
 
 
 def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to=None) -> Refined:
@@ -63,17 +65,17 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     tri = np.asarray(triangles, np.int64)
     n = len(points)
     e = np.stack([tri, np.roll(tri, -1, axis=1)], -1)  # (m, 3, 2): edge j runs from corner j to j + 1
-    keys, inv = np.unique(_keys(e[..., 0], e[..., 1], n), return_inverse=True)
+    keys, inv = np.unique(edge_keys(e[..., 0], e[..., 1], n), return_inverse=True)
     inv = inv.reshape(tri.shape)
     split = np.ones(len(keys), bool)
     if whole is not None and len(whole):
         w = np.asarray(whole, np.int64).reshape(-1, 2)
-        split[np.searchsorted(keys, _keys(w[:, 0], w[:, 1], n))] = False
+        split[np.searchsorted(keys, edge_keys(w[:, 0], w[:, 1], n))] = False
     a, b = keys // n, keys % n
     xy = 0.5 * (points[a] + points[b])
     if moved is not None and len(moved):
         q = np.asarray(moved, np.int64).reshape(-1, 2)
-        xy[np.searchsorted(keys, _keys(q[:, 0], q[:, 1], n))] = np.asarray(to, float).reshape(-1, 2)
+        xy[np.searchsorted(keys, edge_keys(q[:, 0], q[:, 1], n))] = np.asarray(to, float).reshape(-1, 2)
     mid = np.full(len(keys), -1, np.int64)
     mid[split] = n + np.arange(int(split.sum()))
     m = mid[inv]  # (m, 3): the new node on edge j of each triangle
@@ -99,13 +101,8 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     children = np.concatenate(out)
     # a moved node must not fold a triangle over: every child keeps its parent's orientation
     parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3)
-    if np.any(np.sign(_area2(new, children)) != np.sign(_area2(points, tri[parent]))):
+    if np.any(np.sign(doubled_areas(new, children)) != np.sign(doubled_areas(points, tri[parent]))):
         raise MeshError("refining the mesh folds a triangle over (a node placed on a curved part or on the strip "
                         "crosses it); raise the level, or move the part away from the others")
     return Refined(points=new, triangles=children, n_old=n, edge_keys=keys, edge_mid=mid)
 
-
-def _area2(p: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Twice the signed area of each triangle: positive counter-clockwise."""
-    d1, d2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
-    return d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
