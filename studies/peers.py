@@ -123,20 +123,21 @@ def export_level(system, path: Path, **extra) -> None:
     """Write the discrete problem of ``system`` (a ``hertz``-like scene: flat faces, straight
     triangles, no ties) for the peer: nodes, triangles, materials, fixed dofs (``2 node + comp``),
     anchor dofs, pairs, gaps, tributary widths, balanced nodal loads, the exact ``a, p0``."""
-    from cvxdual.geometry.boundary import supported
     from cvxdual.reference import exact_field
     mesh, scene = system.mesh, system.mesh.scene
     mats = [b.material for b in scene.bodies]
     if {k for k, v in system.pieces.counts().items() if v} != {"triangle"} or system.n_r != (system.rdof >= 0).sum() \
-            or any(m.plane != "strain" for m in mats):
-        raise PeerError("the peer needs straight triangles, no ties and plane strain (the hertz scene)")
+            or len(system.supports.rotated) or any(m.plane != "strain" for m in mats):
+        raise PeerError("the peer needs straight triangles, no ties, supports on axis-aligned lines and plane strain "
+                        "(the hertz scene)")
     free = np.flatnonzero(system.rdof >= 0)
     r2dof = np.empty(system.n_r, int)
     r2dof[system.rdof[free]] = free
     ex = exact_field(scene)
     np.savez(path, points=mesh.points, triangles=mesh.triangles(), tri_body=mesh.triangle_body(),
              E=np.array([m.E for m in mats]), nu=np.array([m.nu for m in mats]),
-             fixed_dofs=np.flatnonzero(supported(mesh).ravel()), anchor_dofs=r2dof[np.asarray(system.anchors, int)],
+             fixed_dofs=np.flatnonzero(system.supports.fixed.ravel()),
+             anchor_dofs=r2dof[np.asarray(system.anchors, int)],
              pairs=mesh.pairs, pair_x=mesh.pair_x, eps=system.eps, width=system.width, f=system.f,
              a=ex.hertz.a, p0=ex.hertz.p0, xc=ex.xc, y_face=ex.y_face, **extra)
 

@@ -40,7 +40,7 @@ from cvxdual.eq.element import (
 )
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace
-from cvxdual.geometry.boundary import supported
+from cvxdual.geometry.boundary import supports
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision
 # times the O(10-100) terms of a row); 1e-12 leaves a margin of 10-100.
@@ -238,7 +238,7 @@ def test_displacement_made_pointwise_admissible():
     assert slack(u).min() < -1e-4  # the trap: the chord of a convex gap lies above it
     v, info = admissible_displacement(space, u)
     assert slack(v).min() >= 0 and contact_slack(space, v)[1].min() >= 0
-    fixed = supported(space.mesh)
+    fixed = supports(space.mesh).fixed
     assert np.array_equal(v[fixed], u[fixed])  # supports untouched: v stays in V
     # the largest shift is the deepest penetration, up to the 1e-13 margin v keeps below the gap
     assert info["max_shift"] == pytest.approx(-info["min_slack_before"], rel=1e-6)

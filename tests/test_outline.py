@@ -17,7 +17,7 @@ import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
-from cvxdual.geometry.boundary import supported
+from cvxdual.geometry.boundary import supports
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
 from cvxdual.geometry.triangulation import discretize
@@ -142,7 +142,7 @@ def test_hole_body_is_cut_through_its_hole():
 
 def test_sliding_supports_on_named_parts(patch_outline):
     mesh = build_mesh(patch_outline, 1)
-    fixed = supported(mesh)
+    fixed = supports(mesh).fixed
     bottom = mesh.bodies[1]
     left, far = bottom.side_nodes("left"), bottom.side_nodes("far")
     assert np.all(fixed[left, 0]) and np.all(fixed[far, 1])  # u_x on the vertical line, u_y on the horizontal
@@ -263,7 +263,8 @@ MALFORMED = [
     ("zero length", _outline(RIGHT, '{name = "dot", to = [10.0, -20.0]}', BOTTOM, LEFT), "zero length"),
     ("wrong way", _outline('{name = "right", to = [10.0, 20.0]}', '{name = "bottom", to = [-10.0, 20.0]}', LEFT),
      "does not enclose"),
-    ("slanted sliding", _outline(RIGHT, '{name = "bottom", to = [-10.0, -21.0]}', LEFT), "not a horizontal"),
+    ("sliding on an arc", _outline(RIGHT, '{name = "bottom", to = [-10.0, -20.0], center = [0.0, 0.0]}', LEFT),
+     "not one straight line"),
     ("interval on a part", '[bodies.bottom.boundary.support]\ninterval = [-5.0, 5.0]\n', "split the part"),
     ("outline not a list", 'outline = "box"\n', "non-empty list"),
     ("part without to", _outline(RIGHT, '{name = "bottom"}', LEFT), "missing key 'to'"),
@@ -279,6 +280,9 @@ MALFORMED = [
                                        'through = [[0.0, -21.0]]}', LEFT), "not both"),
     ("spline without points", _outline(RIGHT, '{name = "bottom", to = [-10.0, -20.0], through = 5}', LEFT),
      "through must list"),
+    ("side shorter than the strip", _outline('{name = "step", to = [10.0, -0.2]}',
+                                             '{name = "right", to = [11.0, -20.0]}', BOTTOM, LEFT),
+     "meets the outline part 'step'"),
     ("strip meets a hole", 'holes = [{name = "hole", center = [0.0, -0.8], radius = 0.5}]\n',
      "meets the outline part 'hole'"),
 ]

@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SolverError
-from ..geometry.boundary import supported
+from ..geometry.boundary import supports
 from ..geometry.mesh import Mesh
 from ..geometry.rigid import candidates, check_balance
 from ..p0.assembly import Scales
@@ -45,8 +45,8 @@ def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
     together keeping ``[r_y] = 0`` on the contact pairs (the floating modes, on which the loads
     must balance); otherwise of each body alone (with its contact tractions held fixed)."""
     R = rigid_candidates(mesh)
-    fixed = supported(mesh)
-    rows = R[fixed]  # (n_fixed, 6)
+    sup = supports(mesh)
+    rows = sup.rows(R)  # (n_fixed, 6)
     if joint:
         up, lo = mesh.pairs.T
         coef = _null(np.concatenate([rows, R[lo, 1] - R[up, 1]]), 6)
@@ -54,7 +54,7 @@ def rigid_motions(mesh: Mesh, joint: bool) -> np.ndarray:
         nb = node_body(mesh)
         blocks = []
         for k in range(2):
-            rk = R[fixed & (nb == k)[:, None]][:, 3 * k: 3 * k + 3]
+            rk = sup.rows(R, nb == k)[:, 3 * k: 3 * k + 3]
             nk = _null(rk, 3)
             full = np.zeros((6, nk.shape[1]))
             full[3 * k: 3 * k + 3] = nk

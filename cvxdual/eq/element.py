@@ -19,11 +19,13 @@ def traction_rows(n: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([n[..., 0], z, n[..., 1]], -1), np.stack([z, n[..., 1], n[..., 0]], -1)], -2)
 
 
-def frame_rows(n: np.ndarray) -> np.ndarray:
-    """``(..., 2, 3)``: ``(sigma n).n`` and ``(sigma n).t`` with ``t = (-n2, n1)``."""
-    t = np.stack([-n[..., 1], n[..., 0]], -1)
+def frame_rows(n: np.ndarray, a: np.ndarray | None = None) -> np.ndarray:
+    """``(..., 2, 3)``: ``(sigma n).a`` and ``(sigma n).t`` with ``t = (-a2, a1)``; the axis ``a``
+    is ``n`` unless given (an edge of a sliding support guided across its line)."""
+    a = n if a is None else a
+    t = np.stack([-a[..., 1], a[..., 0]], -1)
     T = traction_rows(n)
-    return np.stack([np.einsum("...i,...ij->...j", n, T), np.einsum("...i,...ij->...j", t, T)], -2)
+    return np.stack([np.einsum("...i,...ij->...j", a, T), np.einsum("...i,...ij->...j", t, T)], -2)
 
 
 def sub_vertices(X: np.ndarray) -> np.ndarray:
@@ -180,10 +182,11 @@ def divergence_to_reference(X: np.ndarray, g: np.ndarray) -> np.ndarray:
     return gr.reshape(-1, 6)
 
 
-def edge_blocks(Q: np.ndarray, ng: np.ndarray) -> np.ndarray:
-    """``(n_T, 6, 2, 2)``: block ``2 j + e`` holds the edge dofs (frame of ``ng``) at end ``e`` of
-    macro edge ``j`` of the mapped reference parameters ``4 j + 2 e + (0, 1)``."""
-    R = frame_rows(ng)  # (n_T, 3, 2, 3)
+def edge_blocks(Q: np.ndarray, ng: np.ndarray, axis: np.ndarray | None = None) -> np.ndarray:
+    """``(n_T, 6, 2, 2)``: block ``2 j + e`` holds the edge dofs (traction on ``ng`` in the frame of
+    ``axis``, by default ``ng``) at end ``e`` of macro edge ``j`` of the mapped reference parameters
+    ``4 j + 2 e + (0, 1)``."""
+    R = frame_rows(ng, axis)  # (n_T, 3, 2, 3)
     D = np.empty((len(Q), 6, 2, 2))
     for j in range(3):
         for e in range(2):

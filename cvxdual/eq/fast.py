@@ -30,7 +30,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from ..errors import SolverError
+from ..errors import MeshError, SolverError
 from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
@@ -545,9 +545,13 @@ class HybridSolver:
 def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
     """Initial contact set ``(n_c, 2)`` from level ``L - 2`` of the same scene
     (:func:`cvxdual.fast.core.coarse_start`: every coarser level warm-started the same way, all
-    in contact below level 2), transferred to ``space.contact_x``; ``None`` below level 2."""
+    in contact below level 2), transferred to ``space.contact_x``; ``None`` below level 2. A level
+    that cannot be meshed gives no hint."""
     def solve_at(level: int, coarser):
-        sp = EquilibriumSpace.from_scene(space.scene, level, space.triangulation)
+        try:
+            sp = EquilibriumSpace.from_scene(space.scene, level, space.triangulation)
+        except MeshError:
+            return None
         start = None if coarser is None else active_from_pairs(sp, *coarser)
         hs = HybridSolver(sp)
         active = hs.run(start)["active"].reshape(-1, 2)

@@ -8,7 +8,8 @@ sub-triangle vertices (27 numbers per macro triangle, index ``9 i + 3 a + compon
 Reduced parameters (docs/equilibrium.md): the 12 conditions "``sigma n`` continuous across
 the three internal edges" leave 15 parameters per macro triangle; we take as parameters
 the JM degrees of freedom, the traction ``sigma n_g`` (normal and tangential components in a
-frame ``n_g, t_g`` fixed per *global* edge) at both ends of each macro edge (12) plus three
+frame ``n_g, t_g`` fixed per *global* edge; on the edges of a sliding support guided across
+them, the frame of its direction) at both ends of each macro edge (12) plus three
 interior "bubbles" with zero boundary traction. Edge parameters are shared by the two
 triangles of an edge, so inter-element continuity holds by construction; the boundary
 conditions fix parameters (tractions, free sides, zero tangential contact traction) or keep
@@ -39,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError, SceneError
+from ..geometry.boundary import sliding_normal
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..geometry.quadrature import gauss01
@@ -316,7 +318,8 @@ def _covering(part, x: np.ndarray) -> np.ndarray:
 
 def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals, face_edge: np.ndarray) -> dict:
     """Kind (free, fixed, contact) and fixed value of every raw edge dof ``4 g + 2 e + k``
-    (``e`` the global end, ``k`` 0 normal, 1 tangential): boundary edges default to traction
+    (``e`` the global end, ``k`` 0 normal, 1 tangential; on a sliding support guided across its
+    edges, ``k`` 0 across the direction and 1 along it: ``axis``): boundary edges default to traction
     free; traction parts fix their projected data; supports free the reaction components. Face
     edges of contact and column intervals are *tied* (see the module docstring): their normal
     dof at each end is the vertical stress there (one parameter per contact edge end shared by
@@ -336,6 +339,7 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
     owned[v_ids[v_ids >= 0]] = True
     skip = edge_keys(faces.vertical[vertical], faces.right[vertical], mesh.n_nodes)[v_ids < 0]  # on a side
     column_kind = np.where(faces.column, FIXED, -1)  # a column off the contact: traction free unless supported
+    axis = edges["ng"].copy()  # the frame of each edge's dofs: its normal, or a guided support's
     trac = {"ids": [], "c": [], "osc2": [], "body": []}
     for k, bm in enumerate(mesh.bodies):
         for part in bm.body.boundary:
@@ -362,8 +366,13 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
                     val[4 * ids + 2 * e + 1] += s_o * np.einsum("mi,mi->m", c[:, e], tg)
                 for key, v in (("ids", ids), ("c", c), ("osc2", osc2), ("body", np.full(len(ids), k))):
                     trac[key].append(v)
-            else:  # clamped frees both components, sliding the normal one (axis-aligned sides)
+            else:  # clamped frees both components, sliding the one across its direction
                 comps = (0, 1) if part.kind == "clamped" else (0,)
+                if part.kind == "sliding":
+                    m = sliding_normal(bm.body, part)
+                    ng = edges["ng"][ids]
+                    across = np.abs(ng[:, 0] * m[1] - ng[:, 1] * m[0]) > 1e-12  # guided across its edges
+                    axis[ids[across]] = m
                 for e in range(2):
                     for comp in comps:
                         kind[4 * ids + 2 * e + comp] = FREE
@@ -387,7 +396,7 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
     contact_x = faces.x[in_contact & (faces.body == 0)]
     if len(contact_x) != n_c or not np.allclose(contact_x, faces.x[in_contact & (faces.body == 1)], rtol=0, atol=tol):
         raise MeshError("internal: the contact intervals of the two faces differ")  # pragma: no cover
-    return {"kind": kind, "value": val, "contact": cidx, "traction": cat, "contact_x": contact_x,
+    return {"kind": kind, "value": val, "axis": axis, "contact": cidx, "traction": cat, "contact_x": contact_x,
             "tied": np.flatnonzero(tied), "raw_n": raw_n}
 
 
@@ -435,8 +444,9 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     face_edge = edge_ids(edges, faces.left, faces.right, mesh.n_nodes)
     ng_local = edges["ng"][edges["id"]]  # (n_T, 3, 2)
     cl = classify(mesh, edges, X, exact_field(scene), faces, face_edge)
+    edges = {**edges, "axis": cl["axis"]}
     Q = piola(X)
-    coef = tie_blocks(inverse2(edge_blocks(Q, ng_local)), edges, face_edge[cl["tied"]])
+    coef = tie_blocks(inverse2(edge_blocks(Q, ng_local, edges["axis"][edges["id"]])), edges, face_edge[cl["tied"]])
     kind = cl["kind"]
     free = np.flatnonzero(kind == FREE)
     n_c = len(cl["contact_x"])

@@ -8,9 +8,12 @@ the same stretch of boundary.
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
-from ..errors import SceneError
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import MeshError, SceneError
 from ..reference.exact import exact_field
 from .mesh import Mesh
 from .pieces import Pieces
@@ -27,41 +30,102 @@ def in_part(part, points: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     return (c >= lo - tol) & (c <= hi + tol)
 
 
-def supported(mesh: Mesh) -> np.ndarray:
-    """``(n_nodes, 2)``: the displacement components the supports fix (clamped: both; sliding:
-    ``u_x`` on a vertical side, ``u_y`` on a horizontal one)."""
-    fixed = np.zeros((mesh.n_nodes, 2), bool)
+@dataclass(frozen=True)
+class Supports:
+    """What the supports fix at each node, in the node's own frame.
+
+    ``frame`` ``(n_nodes, 2, 2)``: rows are the node's unit axes; the identity except on a sliding
+    support whose direction is not an axis (a slanted line, or a guide), whose nodes take the
+    direction and its normal. ``fixed`` ``(n_nodes, 2)``: the frame components held at zero
+    (clamped: both; sliding: the normal one, which for an axis direction is ``u_x`` or ``u_y`` of
+    the identity frame)."""
+
+    fixed: np.ndarray
+    frame: np.ndarray
+
+    @property
+    def rotated(self) -> np.ndarray:
+        """The nodes whose frame is not the identity."""
+        return np.flatnonzero(np.any(self.frame != np.eye(2), axis=(1, 2)))
+
+    def rows(self, R: np.ndarray, nodes: np.ndarray | None = None) -> np.ndarray:
+        """The fixed components of node vectors ``R`` ``(n_nodes, 2, m)``: ``(n_fixed, m)`` rows
+        (those of ``nodes`` only, a boolean mask, if given)."""
+        fixed = self.fixed if nodes is None else self.fixed & nodes[:, None]
+        k, c = np.nonzero(fixed)
+        return np.einsum("ni,nim->nm", self.frame[k, c], R[k])
+
+    def violation(self, v: np.ndarray) -> float:
+        """The largest fixed component of a displacement ``v`` ``(n_nodes, 2)``."""
+        return float(np.abs(self.rows(np.asarray(v, float)[:, :, None])).max(initial=0.0))
+
+
+def supports(mesh: Mesh) -> Supports:
+    """The :class:`Supports` of the mesh's boundary parts. A node under two supports takes both:
+    a sliding node on a second, non-parallel line (a corner) is held like a clamped one."""
+    n = mesh.n_nodes
+    fixed = np.zeros((n, 2), bool)
+    normal = np.zeros((n, 2))  # a sliding support's unit normal where it is not an axis
     for bm in mesh.bodies:
         for part in bm.body.boundary:
             if part.kind == "traction":
                 continue
             nodes = bm.side_nodes(part.on)
             nodes = nodes[in_part(part, mesh.points, nodes)]
-            if part.kind == "clamped":
+            nv = None if part.kind == "clamped" else sliding_normal(bm.body, part)
+            if nv is None:
                 fixed[nodes] = True
+            elif abs(nv[0]) == 1.0 or abs(nv[1]) == 1.0:
+                fixed[nodes, int(abs(nv[1]) == 1.0)] = True
             else:
-                fixed[nodes, sliding_component(bm.body, part)] = True
-    return fixed
+                old = normal[nodes]
+                # a second such support on a node: held both ways unless the normals are parallel
+                # (rounding of the typed coordinates is all that separates parallel normals)
+                cross = np.abs(old[:, 0] * nv[1] - old[:, 1] * nv[0]) > 1e-12
+                fixed[nodes[cross]] = True
+                normal[nodes] = nv
+    slanted = np.any(normal != 0, axis=1)
+    fixed[slanted & fixed.any(axis=1)] = True  # meeting an axis-aligned support
+    slide = slanted & ~fixed.all(axis=1)
+    frame = np.broadcast_to(np.eye(2), (n, 2, 2)).copy()
+    nv = normal[slide]
+    frame[slide] = np.stack([np.stack([nv[:, 1], -nv[:, 0]], 1), nv], 1)  # rows: tangent, normal
+    fixed[slide] = (False, True)
+    return Supports(fixed=fixed, frame=frame)
 
 
-def sliding_component(body, part) -> int:
-    """The displacement component a sliding support fixes: ``u_x`` (0) on a vertical side or line,
-    ``u_y`` (1) on a horizontal one (the body checks that an outline part is one of these)."""
-    if body.is_column:
-        return 0 if part.on in ("left", "right") else 1
-    return 0 if body.outline.part(part.on).segments[0].axis == "y" else 1
+def sliding_normal(body, part) -> np.ndarray:
+    """The unit normal of a sliding support's direction (the displacement component it holds):
+    across its ``direction`` if it names one; else ``(1, 0)`` on a vertical side or line, ``(0, 1)``
+    on a horizontal one, the line's normal on a slanted straight outline part (the body checks that
+    a part without a direction is one straight line)."""
+    if part.direction is not None:
+        d = np.array(part.direction, float)
+    elif body.is_column:
+        d = np.array([0.0, 1.0] if part.on in ("left", "right") else [1.0, 0.0])
+    else:
+        seg = body.outline.part(part.on).segments[0]
+        d = np.subtract(seg.end, seg.start) if seg.axis is None else \
+            np.array([0.0, 1.0] if seg.axis == "y" else [1.0, 0.0])
+    if d[0] == 0.0 or d[1] == 0.0:  # axis-aligned: exactly (1, 0) or (0, 1)
+        return np.array([float(d[0] == 0.0), float(d[1] == 0.0)])
+    return np.array([-d[1], d[0]]) / np.hypot(*d)
 
 
-def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
-    """Index of every dof in ``r`` (``-1`` if fixed); tied nodes share their master's index.
+def free_dofs(sup: Supports, ties: np.ndarray | None) -> np.ndarray:
+    """Index in ``r`` of every frame component (``2k + c``: component ``c`` of node ``k`` in its
+    frame; ``-1`` if fixed); tied nodes share their master's index.
 
-    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces).
+    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces,
+    on the face, where supports keep the identity frame).
     """
-    n_dofs = 2 * mesh.n_nodes
-    fixed = supported(mesh).ravel()  # dof 2k is u_x of node k, 2k+1 its u_y
+    fixed = sup.fixed.ravel()
+    n_dofs = len(fixed)
     master = np.arange(n_dofs)
     if ties is not None and len(ties):
         s, m = np.asarray(ties).T
+        if np.any(sup.frame[s] != sup.frame[m]):
+            raise MeshError("internal: tied nodes in different frames")  # pragma: no cover
         for c in (0, 1):
             master[2 * s + c] = 2 * m + c
             either = fixed[2 * s + c] | fixed[2 * m + c]
@@ -70,6 +134,34 @@ def free_dofs(mesh: Mesh, ties: np.ndarray | None) -> np.ndarray:
     idx = np.full(n_dofs, -1)
     idx[own] = np.arange(int(own.sum()))
     return np.where(fixed, -1, idx[master])
+
+
+def prolongation(sup: Supports, rdof: np.ndarray) -> sp.csr_matrix:
+    """``Z`` ``(n_dofs, n_r)`` with ``q = Z r``: frame component ``c`` of node ``k`` (r index
+    ``rdof[2k + c]``) adds ``frame[k, c]`` to the node's ``(u_x, u_y)``; 0/1 on identity frames."""
+    k, c = np.nonzero(rdof.reshape(-1, 2) >= 0)
+    j = rdof[2 * k + c]
+    vals = sup.frame[k, c]  # (m, 2): the axis in x, y
+    keep = vals != 0.0  # the identity frame's zeros stay out of Z
+    rows = 2 * k[:, None] + np.arange(2)[None, :]
+    return sp.csr_matrix((vals[keep], (rows[keep], np.broadcast_to(j[:, None], vals.shape)[keep])),
+                         shape=(len(rdof), int(rdof.max()) + 1))
+
+
+def to_frames(sup: Supports, nodes: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Local matrices ``k`` ``(m, 2n, 2n)`` on the ``(u_x, u_y)`` of ``nodes`` ``(m, n)`` turned
+    into the nodes' frames, ``G k G^T`` with ``G`` the blocks of the frames (unchanged if every
+    frame is the identity)."""
+    hit = np.flatnonzero(np.any(np.isin(nodes, sup.rotated), axis=1))
+    if not len(hit):
+        return k
+    m, n = nodes[hit].shape
+    G = np.zeros((m, 2 * n, 2 * n))
+    for a in range(n):
+        G[:, 2 * a:2 * a + 2, 2 * a:2 * a + 2] = sup.frame[nodes[hit, a]]
+    out = k.copy()
+    out[hit] = G @ k[hit] @ G.transpose(0, 2, 1)
+    return out
 
 
 def _outward_normal(body, side: str, d: np.ndarray) -> np.ndarray:

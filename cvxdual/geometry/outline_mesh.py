@@ -435,6 +435,13 @@ def _check_strip(body, chain: np.ndarray) -> None:
         below_face = body.sign * (y - body.face.value(xc)) > tol  # on the body's side of the face
         above_chain = body.sign * (np.interp(xc, chain[:, 0], chain[:, 1]) - y) > tol  # not past the chain
         inside = band & below_face & above_chain
+        # a corner of the outline on a side of the strip, past the face and up to the chain (a part
+        # along the side shorter than the strip is deep): the strip would cover body and void alike
+        for xs, yc in ((x0, chain[0, 1]), (x1, chain[-1, 1])):
+            q = np.array([v for sg in p.segments for v in (sg.start, sg.end)])
+            yf = float(body.face.value(xs))
+            inside |= np.any((np.abs(q[:, 0] - xs) <= tol) & (body.sign * (q[:, 1] - yf) > tol)
+                             & (body.sign * (yc - q[:, 1]) > -tol))
         if np.any(segments_meet(a0, a1, pts[:-1], pts[1:], 1e-12 * scale)) or np.any(inside):
             raise MeshError(f"body {body.name!r}: the strip of columns along its face (one column spacing deep, "
                             f"{abs(chain[:, 1] - body.face.value(chain[:, 0])).max():.3g} at most here) meets the "

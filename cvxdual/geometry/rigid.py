@@ -51,18 +51,21 @@ def candidates(mesh) -> np.ndarray:
     return cand
 
 
-def rigid_modes(mesh, pieces, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, Z, f: np.ndarray) -> RigidModes:
+def rigid_modes(mesh, pieces, sup, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, Z,
+                f: np.ndarray) -> RigidModes:
     """Find the rigid motions of ``V_h``; check and balance the loads ``f`` on them.
 
     A combination of the candidates is a motion of ``V_h`` if it respects fixed and tied dofs
+    (components in the nodes' frames, ``sup`` the :class:`~cvxdual.geometry.boundary.Supports`)
     and strains no piece.
     """
     cand = candidates(mesh)
     n_dofs, n_r = len(rdof), int(rdof.max()) + 1
+    in_frames = np.einsum("kci,kim->kcm", sup.frame, cand.reshape(-1, 2, 6)).reshape(n_dofs, 6)
     free = np.flatnonzero(rdof >= 0)
     first = np.full(n_r, n_dofs)  # the master dof (first carrying each r index)
     np.minimum.at(first, rdof[free], free)
-    rows = [cand[rdof < 0], cand[free] - cand[first[rdof[free]]]]
+    rows = [in_frames[rdof < 0], in_frames[free] - in_frames[first[rdof[free]]]]
     # rigid motions strain no straight triangle; only curved pieces (V_h extended along y) can
     curved = np.flatnonzero(pieces.kind != 0)
     strain = np.einsum("pij,pjm->pim", pieces.B[curved], cand[pieces.dofs[curved]]) * mesh.scene.length_scale
@@ -74,7 +77,7 @@ def rigid_modes(mesh, pieces, rdof: np.ndarray, ja: np.ndarray, jb: np.ndarray, 
     empty = np.empty((n_r, 0))
     if null.shape[1] == 0:
         return RigidModes(empty, empty, np.empty(0, int), f, 0.0)
-    modes = cand[first] @ null  # (n_r, m)
+    modes = in_frames[first] @ null  # (n_r, m)
     D = modes[jb] - modes[ja]
     D = np.vstack([D, np.zeros((max(0, D.shape[1] - len(D)), D.shape[1]))])  # at least m rows: vt2 is m x m
     _, s2, vt2 = np.linalg.svd(D, full_matrices=False)  # never the n_pairs^2 U

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SceneError
-from ..geometry.boundary import free_dofs, load_vector
+from ..geometry.boundary import Supports, free_dofs, load_vector, prolongation, supports, to_frames
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..geometry.rigid import rigid_modes
@@ -58,8 +58,9 @@ class System:
     C: np.ndarray  # (n_pieces, 3, 3) Hooke matrix of each piece
     f: np.ndarray  # (n_dofs,) load vector, balanced on the floating modes
     load_imbalance: float  # relative work of the raw loads on the floating modes
-    rdof: np.ndarray  # (n_dofs,) index of each dof in r, or -1 if fixed
-    Z: sp.csr_matrix  # (n_dofs, n_r)
+    supports: Supports  # fixed components and node frames
+    rdof: np.ndarray  # (n_dofs,) index in r of each node's frame component, or -1 if fixed
+    Z: sp.csr_matrix  # (n_dofs, n_r): q = Z r
     ja: np.ndarray  # (n_pairs,) r index of the upper pair node's y dof
     jb: np.ndarray  # (n_pairs,) r index of the lower pair node's y dof
     eps: np.ndarray  # (n_pairs,) initial gap at the pairs
@@ -131,6 +132,10 @@ class System:
         k *= p.area[:, None, None]
         return k
 
+    def frame_stiffness(self) -> np.ndarray:
+        """:meth:`local_stiffness` in the nodes' frames: on the components ``rdof`` indexes."""
+        return to_frames(self.supports, self.pieces.nodes, self.local_stiffness())
+
     def stiffness(self) -> sp.csr_matrix:
         """``K = E A_h^-1 E^T = sum_P |P| B_P^T C_P B_P`` on all dofs."""
         d = self.pieces.dofs
@@ -172,20 +177,19 @@ def assemble(mesh: Mesh, pieces: Pieces, ties: np.ndarray | None = None) -> Syst
     if not (np.all(np.isfinite(E.data)) and np.all(np.isfinite(Ah.data))):
         raise SceneError("the element matrices are not finite: the scene's sizes or moduli are too far apart "
                          "for double precision; rescale the units")
-    rdof = free_dofs(mesh, ties)
-    n_r = int(rdof.max()) + 1
-    free = np.flatnonzero(rdof >= 0)
-    Z = sp.csr_matrix((np.ones(len(free)), (free, rdof[free])), shape=(len(rdof), n_r))
+    sup = supports(mesh)
+    rdof = free_dofs(sup, ties)
+    Z = prolongation(sup, rdof)
     up, lo = mesh.pairs[:, 0], mesh.pairs[:, 1]
     ja, jb = rdof[2 * up + 1], rdof[2 * lo + 1]
-    if np.any(ja < 0) or np.any(jb < 0):
-        raise SceneError("a contact node has its y displacement fixed by a support; "
+    if np.any(ja < 0) or np.any(jb < 0) or len(np.intersect1d(mesh.pairs, sup.rotated)):
+        raise SceneError("a support holds a contact node's y displacement (or slides it along a slanted line); "
                          "supports must not act on the contact interval")
     eps = scene.gap_at(mesh.pair_x)
-    modes = rigid_modes(mesh, pieces, rdof, ja, jb, Z, load_vector(mesh, pieces))
+    modes = rigid_modes(mesh, pieces, sup, rdof, ja, jb, Z, load_vector(mesh, pieces))
     return System(mesh=mesh, pieces=pieces, E=E, Ah=Ah, C=C, f=modes.f, load_imbalance=modes.load_imbalance,
-                  rdof=rdof, Z=Z, ja=ja, jb=jb, eps=eps, width=tributary(mesh.pair_x), anchors=modes.anchors,
-                  floating=modes.floating, separating=modes.separating,
+                  supports=sup, rdof=rdof, Z=Z, ja=ja, jb=jb, eps=eps, width=tributary(mesh.pair_x),
+                  anchors=modes.anchors, floating=modes.floating, separating=modes.separating,
                   scales=problem_scales(scene, modes.f, eps))
 
 

@@ -87,7 +87,7 @@ class DisplacementSolver:
 
     def __init__(self, system: System):
         self.system = s = system
-        self.kloc = s.local_stiffness()  # reused by every factorisation
+        self.kloc = s.frame_stiffness()  # on the components r indexes; reused by every factorisation
         self.rd = s.rdof[s.pieces.dofs]
         self.g = s.Z.T @ s.f
         self.anchored = np.zeros(s.n_r, bool)

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import SolverError
+from ..errors import MeshError, SolverError
 from ..fast.core import coarse_start, transfer_active
 from ..geometry.triangulation import discretize
 from ..model.solvers import FAST, TIME_LIMIT_OPTION
@@ -50,10 +50,14 @@ def warm_start_pairs(scene: Scene, triangulation: str, level: int, pair_x: np.nd
     """Initial active set for ``level`` at the pair abscissae ``pair_x``: the converged set of
     level ``level - 2`` (:func:`~cvxdual.fast.core.coarse_start`), transferred; ``None`` below
     level 2. A coarse level that the fast path cannot solve, or where nothing acts, gives no
-    hint: the next level starts cold."""
+    hint: the next level starts cold; so does one that cannot be meshed (an outline's strip is
+    deepest there)."""
     def solve_at(lv: int, coarser):
         log.debug("warm start: the active set of level %d", lv)
-        system = assemble(*discretize(scene, triangulation, lv))
+        try:
+            system = assemble(*discretize(scene, triangulation, lv))
+        except MeshError:
+            return None
         if nothing_acts(system):
             return None
         x = system.mesh.pair_x

@@ -10,8 +10,10 @@ sides by named parts of any shape, holes included; its ``far`` is the outline's 
 Boundary parts (a scene declares only those it has; undeclared boundary is traction free):
 
 - ``clamped``: ``u = 0`` (the paper's ``Gamma_u``);
-- ``sliding``: normal displacement zero, tangential traction zero (``Gamma_0``; axis-aligned
-  sides only: ``u_x = 0`` on ``left``/``right``, ``u_y = 0`` on ``far``);
+- ``sliding``: the boundary slides along a line, with no traction along it (``Gamma_0``): by
+  default its own line (``u_x = 0`` on ``left``/``right``, ``u_y = 0`` on ``far``, the normal
+  component on a straight outline part of any slope); with a ``direction`` the one it names (a
+  roller guided that way: the displacement across it is zero, the traction along it zero);
 - ``traction``: a prescribed traction ``P`` (``Gamma_tau``): ``uniform`` (a constant vector)
   or ``exact`` (``sigma* . n`` of the scene's exact field).
 
@@ -66,6 +68,7 @@ class BoundaryPart:
     traction: Traction | None = None
     interval: tuple[float, float] | None = None
     name: str = ""
+    direction: tuple[float, float] | None = None  # a sliding support's direction; None: along its line
 
     def __post_init__(self):
         if not isinstance(self.on, str) or not self.on:
@@ -83,6 +86,15 @@ class BoundaryPart:
                 raise SceneError(f"boundary part {short(self.name)}: interval must have lo < hi, "
                                  f"got {short(self.interval)}")
             object.__setattr__(self, "interval", (lo, hi))
+        if self.direction is not None:
+            if self.kind != "sliding":
+                raise SceneError(f"boundary part {short(self.name)}: only a sliding support has a direction; "
+                                 "drop direction")
+            d = pair(self.direction, f"boundary part {short(self.name)} direction")
+            if d == (0.0, 0.0):
+                raise SceneError(f"boundary part {short(self.name)}: direction must not be zero; give the "
+                                 "direction the boundary slides in, e.g. [1.0, 0.0]")
+            object.__setattr__(self, "direction", d)
 
 
 @dataclass(frozen=True)
@@ -152,6 +164,9 @@ class Body:
                                  f"which is not a side; a column body has the sides {', '.join(SIDES)}")
             elif part.interval is not None:
                 self._check_interval(part, x0, x1, far)
+            if part.direction is not None and part.on == "face":
+                raise SceneError(f"body {short(self.name)}: sliding support {part.name!r} on the face has a "
+                                 "direction; a support on the face slides along it, drop direction")
             if part.kind != "traction" and part.on == "face" and not self.face.is_flat():
                 raise SceneError(f"body {short(self.name)}: a {part.kind} support on a curved face is not "
                                  "axis-aligned; put supports on flat sides")
@@ -179,9 +194,9 @@ class Body:
             raise SceneError(f"body {short(self.name)}: boundary part {part.name!r} has an interval on the outline "
                              f"part {part.on!r}; split the part in the outline instead")
         seg = self.outline.part(part.on).segments
-        if part.kind == "sliding" and (len(seg) > 1 or seg[0].axis is None):
+        if part.kind == "sliding" and part.direction is None and (len(seg) > 1 or seg[0].is_arc or seg[0].is_spline):
             raise SceneError(f"body {short(self.name)}: sliding support {part.name!r} is on {part.on!r}, which is not "
-                             "a horizontal or vertical line; slide on an axis-aligned line or clamp it")
+                             "one straight line; give its direction (e.g. direction = [1.0, 0.0]) or clamp it")
 
     @property
     def is_column(self) -> bool:
@@ -448,7 +463,7 @@ def problem_entries(scene: Scene) -> tuple[tuple[str, object], ...]:
         w = f"bodies.{b.name}"
         items += [(f"{w}.position", b.position), (f"{w}.x", b.x_range), (f"{w}.far", b.far), (f"{w}.face", b.face),
                   (f"{w}.material", b.material.C), (f"{w}.body_force", b.body_force), (f"{w}.outline", b.outline)]
-        items += [(f"{w}.boundary.{p.name or i}", (p.on, p.kind, p.traction, p.interval))
+        items += [(f"{w}.boundary.{p.name or i}", (p.on, p.kind, p.traction, p.interval, p.direction))
                   for i, p in enumerate(b.boundary)]
     items += [("contact.interval", scene.contact), ("contact.gap", scene.gap), ("contact.friction", scene.friction)]
     ex = scene.exact

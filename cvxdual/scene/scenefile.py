@@ -28,7 +28,7 @@ from .scene import WHY, Body, BoundaryPart, ExactSpec, Friction, MeshSpec, Scene
 TOP_KEYS = {"name", "description", "base", "units", "plane", "contact", "exact", "mesh", "bodies"}
 BODY_KEYS = {"position", "x", "far", "face", "material", "boundary", "body_force", "layers", "focus_depth", "outline",
              "holes", "geo"}
-PART_KEYS = {"on", "kind", "traction", "interval"}
+PART_KEYS = {"on", "kind", "traction", "interval", "direction"}
 MATERIAL_KEYS = {"E", "nu", "hooke"}
 CONTACT_KEYS = {"interval", "gap", "friction"}
 FRICTION_KEYS = {"kind", "g"}
@@ -371,7 +371,7 @@ def _body(name: str, d: dict, plane: str) -> Body:
             td = _check_keys(pd["traction"], TRACTION_KEYS, f"{pw}.traction")
             tr = Traction(kind=td.get("kind", "uniform"), value=td.get("value", (0.0, 0.0)))
         parts.append(BoundaryPart(on=_need(pd, "on", pw), kind=_need(pd, "kind", pw), traction=tr,
-                                  interval=pd.get("interval"), name=pname))
+                                  interval=pd.get("interval"), name=pname, direction=pd.get("direction")))
     focus_depth = d.get("focus_depth")
     outline = None
     if "geo" in d:
