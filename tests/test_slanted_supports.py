@@ -239,7 +239,7 @@ def test_wedge_bracket_is_certified_and_closes(scenes, name, rate_min):
     error bound sqrt(2 G) falls with h: at about h^1 on the wedge (fitted 0.94 on levels 1-3; 0.8
     allows for the contact zone's jump at level 3). The guided block is singular where a guide
     meets the loaded bottom: its P0 stress in the corner triangle grows as r^-0.46 (levels 4-6),
-    so the energy error falls no faster than h^0.54; 0.56 fitted, 0.45 asked."""
+    so the energy error falls no faster than h^0.54; 0.56 fitted on levels 1-3, 0.45 asked."""
     h, err = [], []
     for level in (1, 2, 3):
         sol = cd.solve(scenes[name], level=level, stress_space="eq", solver="fast")
