@@ -287,3 +287,26 @@ def test_unbalanced_loads_refused():
     with pytest.raises(UnbalancedLoadError, match="unbalanced"):
         EquilibriumSpace.from_scene(bad, 0)
     assert EquilibriumSpace.from_scene(scene, 0).load_imbalance < 1e-12  # quadrature rounding only
+
+
+def test_loads_doing_no_work_on_a_floating_motion_balance():
+    """The upper block of ``blocks`` loaded only vertically and free to slide sideways (frictionless
+    contact, no support in x): the loads do no work on the slide. The balance check measured that
+    rounding against the rounding of the loads' own contributions (0.42 "relative work") and the
+    eq space refused the scene; it is now measured against all the loads. A real sideways load,
+    1e-3 of the vertical one, is still refused in both spaces."""
+    top = {"on": "far", "kind": "traction", "traction": {"value": [0.0, -50.0]}}
+    over = {"contact": {"interval": [-6.0, 6.0]},
+            "bodies": {"lower": {"boundary": {"push": {"on": "far", "kind": "sliding"}}},
+                       "upper": {"boundary": {"top": top}}}}
+    scene = cd.load_scene("blocks", [over])
+    sol = cd.solve(scene, level=2, stress_space="eq", solver="fast")
+    # rounding over 1e-8 of all the loads' work (rigid.ROUNDING): 3e-10 seen, far under BALANCE_TOL
+    assert sol.bounds["guaranteed"] and sol.space.load_imbalance <= 1e-8
+    p0 = cd.solve(scene, level=2, solver="fast")
+    # the upper block's balance: the contact carries its load, 50 over 20 mm, to rounding
+    assert p0.contact["force"].sum() == pytest.approx(1000.0, rel=1e-12)
+    sideways = {"bodies": {"upper": {"boundary": {"top": {"traction": {"value": [0.05, -50.0]}}}}}}
+    for space in ("p0", "eq"):
+        with pytest.raises(cd.UnbalancedLoadError):
+            cd.solve(cd.load_scene("blocks", [over, sideways]), level=2, stress_space=space, solver="fast")

@@ -268,7 +268,7 @@ def test_a_support_on_a_contact_node_is_refused(scenes, tmp_path):
     text = WEDGE.replace("interval = [-6.0, 6.0]", "interval = [-10.0, 10.0]").replace(
         "x = [-12.0, 12.0]", "x = [-10.0, 10.0]")
     (tmp_path / "w.toml").write_text(text)
-    with pytest.raises(cd.SceneError, match="supports must not act on the contact interval"):
+    with pytest.raises(cd.SceneError, match=r"set a \[contact\] interval that stops short"):
         cd.solve(load_scene(str(tmp_path / "w.toml")), level=1, solver="fast")
 
 
@@ -343,3 +343,54 @@ def test_a_side_shorter_than_the_strip_is_refused_until_the_strip_thins(scenes):
     with pytest.raises(cd.MeshError, match="meets the outline part 'step'; raise the level"):
         build_mesh(scenes["patch"], 1)
     assert len(build_mesh(scenes["patch"], 2).bodies[1].side_nodes("step")) >= 2
+
+
+def test_a_traction_across_the_guide_changes_nothing(scenes):
+    """A load on the guided slope straight across the guide goes into the rollers: P0's displacement
+    and the eq bracket stay as they were (the load's values are written in the edges' guided frame;
+    in the edges' own normal frame they moved the bracket to lower > upper)."""
+    m = _across(GUIDES["right"])
+    loaded = load_scene(str(ROOT / "examples" / "wedge-on-rollers.toml"), [{"bodies": {"block": {"boundary": {
+        "across": {"on": "right", "kind": "traction", "traction": {"value": (100.0 * m).tolist()}}}}}}])
+    for space in ("p0", "eq"):
+        a = cd.solve(scenes["guided"], level=2, stress_space=space, solver="fast")
+        b = cd.solve(loaded, level=2, stress_space=space, solver="fast")
+        # the rollers' reaction changes by the load, nothing else: rounding through direct solves
+        assert np.abs(b.displacement - a.displacement).max() <= 1e-10 * np.abs(a.displacement).max()
+    assert b.bounds["guaranteed"]
+    assert b.bounds["energy_lower"] == pytest.approx(a.bounds["energy_lower"], rel=1e-10)
+    assert b.bounds["energy_upper"] == pytest.approx(a.bounds["energy_upper"], rel=1e-10)
+
+
+def test_a_guide_reaching_a_tied_node_holds_both_nodes():
+    """Type 1 ties a node one layer below a concave face's end to the face node above it (one
+    displacement for both). A guide on the side up to between them holds the lower node: the tie
+    makes both take it, and both move along the guide."""
+    d = {"contact": {"interval": [-16.0, 16.0]},
+         "bodies": {"groove": {"boundary": {"right": {"interval": [-20.0, 6.0], "direction": [1.0, -2.0]}}}}}
+    scene = load_scene("cylinder-in-groove", [d])
+    mesh, pieces, ties = discretize(scene, "type1", 2)
+    sup = supports(mesh)
+    rotated = np.isin(ties, sup.rotated)
+    split = ties[rotated[:, 0] != rotated[:, 1]]
+    assert len(split)  # the case: one node of a tie on the guide, the other not
+    sol = cd.solve(scene, level=2, triangulation="type1", solver="fast")
+    m = _across([1.0, -2.0])
+    u = sol.displacement[split]  # (k, 2 nodes, 2)
+    scale = np.abs(sol.displacement).max()
+    assert np.abs(u[:, 0] - u[:, 1]).max() <= 1e-14 * scale  # tied: equal up to rounding
+    assert np.abs(u @ m).max() <= 1e-13 * scale  # both on the guide
+    assert cd.solve(scene, level=2, triangulation="type1", stress_space="eq", solver="fast").bounds["guaranteed"]
+
+
+def test_sliding_on_an_outline_bodys_face():
+    """A flat face outside the contact interval may slide (``u_y = 0``) on an outline body too."""
+    over = {"contact": {"interval": [-6.0, 6.0]},
+            "bodies": {"top": {"boundary": {"f": {"on": "face", "kind": "sliding", "interval": [-10.0, -8.0]}}}}}
+    sol = cd.solve(load_scene("block-with-hole", [over]), level=1, solver="fast")
+    top = sol.mesh.bodies[0]
+    face = top.side_nodes("face")
+    x = sol.mesh.points[face, 0]
+    held = face[(x >= -10.0) & (x <= -8.0)]
+    assert len(held) >= 2 and np.all(sol.displacement[held, 1] == 0.0)  # held exactly: not an unknown
+    assert np.abs(sol.displacement[face[x > -7.0], 1]).max() > 0

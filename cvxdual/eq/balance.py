@@ -104,7 +104,11 @@ def balance_loads(space) -> tuple[np.ndarray, float]:
     W, bf, bf_abs = work_rows(space, r)
     sigma0 = space.sigma0
     work = W @ sigma0 + bf
-    imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs)
+    te = space.traction_edges
+    size = float(np.sum(space.edges["length"][te["ids"].astype(int)] * np.abs(te["c"]).sum((1, 2)))) \
+        if len(te["ids"]) else 0.0  # all the tractions' size: |c| at both ends times the length
+    total = (size + float(bf_abs.sum())) * np.abs(r).max(axis=(0, 1))
+    imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs, total)
     loaded = np.flatnonzero(space.z_fix != 0)
     if len(loaded) == 0:
         return space.z_fix, imbalance

@@ -273,12 +273,13 @@ def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
     work = float(np.sum(area * np.einsum("tk,tk->t", F, v[space.tri].mean(1))))
     ed = space.edges
     b = ed["boundary"]
-    n_out, s_o = outward_normals(ed, space.X, space.mesh.points, b)
-    tg = np.stack([-ed["ng"][b, 1], ed["ng"][b, 0]], 1)
+    _, s_o = outward_normals(ed, space.X, space.mesh.points, b)
+    a = ed["axis"][b]  # the frame of the edge's dofs
+    ta = np.stack([-a[:, 1], a[:, 0]], 1)
     t = []
     for e in range(2):  # traction at the global ends from the fixed dofs (free ones are 0 in z_fix)
         dn, dt = space.z_fix[4 * b + 2 * e], space.z_fix[4 * b + 2 * e + 1]
-        t.append(dn[:, None] * n_out + (s_o * dt)[:, None] * tg)
+        t.append(s_o[:, None] * (dn[:, None] * a + dt[:, None] * ta))  # sigma n_out = s_o sigma n_g
     v0, v1 = v[ed["lo"][b]], v[ed["hi"][b]]
     ell = ed["length"][b] / 6.0
     work += float(np.sum(ell * (np.einsum("bi,bi->b", t[0], 2 * v0 + v1) + np.einsum("bi,bi->b", t[1], v0 + 2 * v1))))

@@ -339,7 +339,7 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
     owned[v_ids[v_ids >= 0]] = True
     skip = edge_keys(faces.vertical[vertical], faces.right[vertical], mesh.n_nodes)[v_ids < 0]  # on a side
     column_kind = np.where(faces.column, FIXED, -1)  # a column off the contact: traction free unless supported
-    axis = edges["ng"].copy()  # the frame of each edge's dofs: its normal, or a guided support's
+    axis, held = guided_axes(mesh, edges, skip, owned)
     trac = {"ids": [], "c": [], "osc2": [], "body": []}
     for k, bm in enumerate(mesh.bodies):
         for part in bm.body.boundary:
@@ -360,22 +360,18 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
             n_out, s_o = outward_normals(edges, X, mesh.points, ids)
             if part.kind == "traction":
                 c, osc2 = project_traction(mesh, edges, k, ids, n_out, part.traction, exact)
-                tg = np.stack([-edges["ng"][ids, 1], edges["ng"][ids, 0]], 1)
-                for e in range(2):
-                    val[4 * ids + 2 * e] += np.einsum("mi,mi->m", c[:, e], n_out)
-                    val[4 * ids + 2 * e + 1] += s_o * np.einsum("mi,mi->m", c[:, e], tg)
+                a = axis[ids]
+                ta = np.stack([-a[:, 1], a[:, 0]], 1)
+                for e in range(2):  # sigma n_g = s_o c in the edge's frame
+                    val[4 * ids + 2 * e] += s_o * np.einsum("mi,mi->m", c[:, e], a)
+                    val[4 * ids + 2 * e + 1] += s_o * np.einsum("mi,mi->m", c[:, e], ta)
                 for key, v in (("ids", ids), ("c", c), ("osc2", osc2), ("body", np.full(len(ids), k))):
                     trac[key].append(v)
-            else:  # clamped frees both components, sliding the one across its direction
-                comps = (0, 1) if part.kind == "clamped" else (0,)
-                if part.kind == "sliding":
-                    m = sliding_normal(bm.body, part)
-                    ng = edges["ng"][ids]
-                    across = np.abs(ng[:, 0] * m[1] - ng[:, 1] * m[0]) > 1e-12  # guided across its edges
-                    axis[ids[across]] = m
+            else:  # clamped frees both components, sliding the one across its direction (both if held)
                 for e in range(2):
-                    for comp in comps:
-                        kind[4 * ids + 2 * e + comp] = FREE
+                    kind[4 * ids + 2 * e] = FREE
+                    both = ids if part.kind == "clamped" else ids[held[ids]]
+                    kind[4 * both + 2 * e + 1] = FREE
     # the face edges' ends at the interval's left and right abscissa (global ends 0 = lo, 1 = hi)
     left_end = (edges["hi"][face_edge] == faces.left).astype(int)
     ends = np.stack([left_end, 1 - left_end], 1)
@@ -398,6 +394,29 @@ def classify(mesh: Mesh, edges: dict, X: np.ndarray, exact, faces: FaceIntervals
         raise MeshError("internal: the contact intervals of the two faces differ")  # pragma: no cover
     return {"kind": kind, "value": val, "axis": axis, "contact": cidx, "traction": cat, "contact_x": contact_x,
             "tied": np.flatnonzero(tied), "raw_n": raw_n}
+
+
+def guided_axes(mesh: Mesh, edges: dict, skip: np.ndarray, owned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The frame of every edge's dofs, ``axis`` ``(n_edges, 2)``: its normal ``n_g``, or on a sliding
+    support guided across the edge the normal ``m`` of its direction; and ``held``: edges under two
+    sliding supports whose normals differ (both components are reactions there, as when clamped)."""
+    guide = np.zeros((len(edges["keys"]), 2))
+    held = np.zeros(len(edges["keys"]), bool)
+    for k, bm in enumerate(mesh.bodies):
+        for part in bm.body.boundary:
+            if part.kind != "sliding":
+                continue
+            ids, _ = part_edges(mesh, edges, k, part, skip)
+            ids = ids[~owned[ids]]
+            m = sliding_normal(bm.body, part)
+            prev = guide[ids]
+            held[ids[np.abs(prev[:, 0] * m[1] - prev[:, 1] * m[0]) > 1e-12]] = True  # rounding only: parallel
+            guide[ids] = m
+    ng = edges["ng"]
+    across = (np.abs(ng[:, 0] * guide[:, 1] - ng[:, 1] * guide[:, 0]) > 1e-12) & ~held
+    axis = ng.copy()
+    axis[across] = guide[across]
+    return axis, held
 
 
 def _zero(part) -> bool:

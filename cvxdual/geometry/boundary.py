@@ -55,6 +55,24 @@ class Supports:
         k, c = np.nonzero(fixed)
         return np.einsum("ni,nim->nm", self.frame[k, c], R[k])
 
+    def tied(self, ties: np.ndarray | None) -> Supports:
+        """The supports with each tie ``(slave, master)`` (type-1 concave pieces: one displacement
+        for both nodes) holding both nodes by the constraints of either: one node's normal if only
+        it has one, both components if they have two that differ (or either is held both ways)."""
+        if ties is None or not len(ties):
+            return self
+        s, m = np.asarray(ties).T
+        fixed, frame = self.fixed.copy(), self.frame.copy()
+        one = fixed.sum(1) == 1
+        normal = np.where(one[:, None], np.einsum("kc,kci->ki", fixed, frame), 0.0)  # the one held axis
+        ns, nm = normal[s], normal[m]
+        full = fixed[s].all(1) | fixed[m].all(1) | (np.abs(ns[:, 0] * nm[:, 1] - ns[:, 1] * nm[:, 0]) > 1e-12)
+        src = np.where(one[m], m, s)  # the node whose constraint both take (the master's if it has one)
+        for node in (s, m):
+            frame[node] = np.where(full[:, None, None], np.eye(2), frame[src])
+            fixed[node] = np.where(full[:, None], True, fixed[src])
+        return Supports(fixed=fixed, frame=frame)
+
     def violation(self, v: np.ndarray) -> float:
         """The largest fixed component of a displacement ``v`` ``(n_nodes, 2)``."""
         return float(np.abs(self.rows(np.asarray(v, float)[:, :, None])).max(initial=0.0))
@@ -101,6 +119,8 @@ def sliding_normal(body, part) -> np.ndarray:
     a part without a direction is one straight line)."""
     if part.direction is not None:
         d = np.array(part.direction, float)
+    elif part.on == "face":  # a flat face (the body refuses supports on curved ones)
+        d = np.array([1.0, 0.0])
     elif body.is_column:
         d = np.array([0.0, 1.0] if part.on in ("left", "right") else [1.0, 0.0])
     else:
@@ -116,8 +136,8 @@ def free_dofs(sup: Supports, ties: np.ndarray | None) -> np.ndarray:
     """Index in ``r`` of every frame component (``2k + c``: component ``c`` of node ``k`` in its
     frame; ``-1`` if fixed); tied nodes share their master's index.
 
-    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces,
-    on the face, where supports keep the identity frame).
+    ``ties`` (``(m, 2)`` node pairs ``(slave, master)``) joins whole nodes (type-1 concave pieces);
+    ``sup`` must already hold tied nodes alike (:meth:`Supports.tied`).
     """
     fixed = sup.fixed.ravel()
     n_dofs = len(fixed)
@@ -125,7 +145,7 @@ def free_dofs(sup: Supports, ties: np.ndarray | None) -> np.ndarray:
     if ties is not None and len(ties):
         s, m = np.asarray(ties).T
         if np.any(sup.frame[s] != sup.frame[m]):
-            raise MeshError("internal: tied nodes in different frames")  # pragma: no cover
+            raise MeshError("internal: tied nodes in different frames (use Supports.tied)")  # pragma: no cover
         for c in (0, 1):
             master[2 * s + c] = 2 * m + c
             either = fixed[2 * s + c] | fixed[2 * m + c]

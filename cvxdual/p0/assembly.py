@@ -177,14 +177,15 @@ def assemble(mesh: Mesh, pieces: Pieces, ties: np.ndarray | None = None) -> Syst
     if not (np.all(np.isfinite(E.data)) and np.all(np.isfinite(Ah.data))):
         raise SceneError("the element matrices are not finite: the scene's sizes or moduli are too far apart "
                          "for double precision; rescale the units")
-    sup = supports(mesh)
+    sup = supports(mesh).tied(ties)
     rdof = free_dofs(sup, ties)
     Z = prolongation(sup, rdof)
     up, lo = mesh.pairs[:, 0], mesh.pairs[:, 1]
     ja, jb = rdof[2 * up + 1], rdof[2 * lo + 1]
     if np.any(ja < 0) or np.any(jb < 0) or len(np.intersect1d(mesh.pairs, sup.rotated)):
-        raise SceneError("a support holds a contact node's y displacement (or slides it along a slanted line); "
-                         "supports must not act on the contact interval")
+        raise SceneError("a support acts on a contact node (it holds its y displacement, or guides it along a "
+                         "slanted line or direction); set a [contact] interval that stops short of the supported "
+                         "part, or move the support off the contact interval")
     eps = scene.gap_at(mesh.pair_x)
     modes = rigid_modes(mesh, pieces, sup, rdof, ja, jb, Z, load_vector(mesh, pieces))
     return System(mesh=mesh, pieces=pieces, E=E, Ah=Ah, C=C, f=modes.f, load_imbalance=modes.load_imbalance,
