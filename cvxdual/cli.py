@@ -94,17 +94,18 @@ def _cmd_solve(args) -> int:
     from .scene.scenefile import load_scene, parse_assignment
     from .validate import file_stem
 
-    scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])
-    solver = None if args.solver is None else resolve_solver(args.solver)
-    check_triangulation(args.triangulation)
     time_limit = check_time_limit(args.time_limit)
-    out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
-    if out is not None:
-        # fail before the work, and create nothing until there are results; but free the space of
-        # killed runs' leftovers now, not after a solve that may take minutes
-        sweep_leftovers(check_output_dir(out))
+    # the hard stop covers reading the scene too (bounded work: a .geo file is read, never run)
     hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
     with _solver_log_on_stderr(args.verbose), hard_stop:
+        scene = load_scene(args.scene, [parse_assignment(s) for s in args.set])
+        solver = None if args.solver is None else resolve_solver(args.solver)
+        check_triangulation(args.triangulation)
+        out = None if args.no_output else Path(args.out or Path("out") / file_stem(scene.name))
+        if out is not None:
+            # fail before the work, and create nothing until there are results; but free the space of
+            # killed runs' leftovers now, not after a solve that may take minutes
+            sweep_leftovers(check_output_dir(out))
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
                     max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
     written, t_write = [], None

@@ -101,6 +101,14 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     at DEBUG).
     """
     deadline = Deadline(time_limit)
+    deadline.fast = str(solver).upper() == FAST  # the advice of a time-out before the solver is resolved
+    with deadline.enforced():  # from the start: the size probe's meshes count too
+        return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds,
+                      max_memory, fallback, verbose, solver_options)
+
+
+def _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds, max_memory,
+           fallback, verbose, solver_options) -> Solution:
     scene = as_scene(scene)
     gmsh0 = gmsh_seconds()
     chosen = solver is None and not solver_options  # options name their solver: Clarabel's, as always
@@ -129,26 +137,25 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     attempt = partial(_attempt, scene, triangulation, level, stress_space, bounds, check=check,
                       warm_start=warm_start, deadline=deadline, verbose=verbose)
     try:
-        with deadline.enforced():
+        try:
+            return _gmsh_timed(attempt(solver, **solver_options), scene, gmsh0)
+        except (SolverError, AccuracyError) as e:
+            if not fallback or not (solver == FAST or (chosen and solver != DEFAULT_SOLVER)):
+                raise
+            deadline.check()  # no time left for another solver
+            # the fast path (or the size's default) failed where Clarabel may not: hand over, say so
+            reason = one_line(e, 300)
+            name = "the fast path" if solver == FAST else solver
             try:
-                return _gmsh_timed(attempt(solver, **solver_options), scene, gmsh0)
-            except (SolverError, AccuracyError) as e:
-                if not fallback or not (solver == FAST or (chosen and solver != DEFAULT_SOLVER)):
-                    raise
-                deadline.check()  # no time left for another solver
-                # the fast path (or the size's default) failed where Clarabel may not: hand over, say so
-                reason = one_line(e, 300)
-                name = "the fast path" if solver == FAST else solver
-                try:
-                    check_size(scene, level, False, stress_space, bounds, max_memory)
-                    log.info("%s failed (%s); solving with %s", name, reason, DEFAULT_SOLVER)
-                    sol = attempt(DEFAULT_SOLVER)
-                except CvxdualError as e2:  # both paths failed: say so, with both reasons
-                    both = f"{name} failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
-                    raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
-                sol = replace(sol, solver=sol.solver.replace(fallback=f"{name} failed ({reason}); "
-                                                                    f"solved by {DEFAULT_SOLVER}"))
-                return _gmsh_timed(sol, scene, gmsh0)
+                check_size(scene, level, False, stress_space, bounds, max_memory)
+                log.info("%s failed (%s); solving with %s", name, reason, DEFAULT_SOLVER)
+                sol = attempt(DEFAULT_SOLVER)
+            except CvxdualError as e2:  # both paths failed: say so, with both reasons
+                both = f"{name} failed ({reason}); {DEFAULT_SOLVER}, tried after it, failed too: "
+                raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
+            sol = replace(sol, solver=sol.solver.replace(fallback=f"{name} failed ({reason}); "
+                                                                f"solved by {DEFAULT_SOLVER}"))
+            return _gmsh_timed(sol, scene, gmsh0)
     except MemoryError:
         what = f"ran out of memory solving {short(scene.name, 40)} at level {level}"
         raise TooLargeError(f"{what}; lower the level or free memory",

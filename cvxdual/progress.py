@@ -23,6 +23,7 @@ import signal
 import threading
 import time
 from contextlib import contextmanager
+from contextvars import ContextVar
 
 from .errors import CvxdualError, TimeLimitError
 
@@ -44,6 +45,16 @@ def check_time_limit(seconds) -> float | None:
         what = f"must be a positive number of seconds up to {MAX_TIME_LIMIT:g}, got {seconds!r}"
         raise CvxdualError(f"time_limit {what}", cli=f"--time-limit {what}")
     return value
+
+
+_ACTIVE: ContextVar[Deadline | None] = ContextVar("cvxdual_deadline", default=None)
+
+
+def time_left() -> float | None:
+    """Seconds left of the deadline being enforced in this context (``None``: no limit): work
+    that runs outside this process (gmsh's child) is given no more."""
+    d = _ACTIVE.get()
+    return None if d is None else d.remaining()
 
 
 class _Alarm(BaseException):
@@ -86,7 +97,17 @@ class Deadline:
     @contextmanager
     def enforced(self):
         """Interrupt the run by ``SIGALRM`` at the deadline, where that is safe (see the module
-        docstring); elsewhere the phase ends and :meth:`check` raises."""
+        docstring); elsewhere the phase ends and :meth:`check` raises. Inside, :func:`time_left`
+        reads this deadline."""
+        token = _ACTIVE.set(self)
+        try:
+            with self._alarm():
+                yield self
+        finally:
+            _ACTIVE.reset(token)
+
+    @contextmanager
+    def _alarm(self):
         usable = (self.seconds is not None and hasattr(signal, "setitimer")
                   and threading.current_thread() is threading.main_thread()
                   and signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None))

@@ -19,11 +19,11 @@ import os
 import re
 import resource
 from dataclasses import dataclass
-from pathlib import Path
 
 from .errors import TooLargeError
 from .geometry.mesh import mesh_size
 from .geometry.triangulation import column_breaks
+from .memory import available_memory
 from .validate import short
 
 BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)
@@ -75,32 +75,6 @@ def parse_size(value) -> float:
         if m and float(m.group(1)) > 0:
             return float(m.group(1)) * _UNITS[m.group(2) or ""]
     raise TooLargeError(f"a memory limit must be a positive size such as 16GB or 500MB, or 'none'; got {short(value)}")
-
-
-def available_memory() -> float:
-    """Bytes this process can still allocate: the smallest of MemAvailable, the cgroup's
-    remaining limit and the address-space rlimit's headroom (``inf`` where none is known)."""
-    out = [math.inf]
-    try:
-        info = dict(line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines())
-        out.append(float(info["MemAvailable"].split()[0]) * 1024)
-    except (OSError, KeyError, ValueError):
-        pass
-    try:
-        cg = Path("/sys/fs/cgroup")
-        limit = (cg / "memory.max").read_text().strip()
-        if limit != "max":
-            out.append(float(limit) - float((cg / "memory.current").read_text()))
-    except (OSError, ValueError):
-        pass
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft != resource.RLIM_INFINITY:
-        try:
-            vm = next(line for line in Path("/proc/self/status").read_text().splitlines() if line.startswith("VmSize"))
-            out.append(soft - float(vm.split()[1]) * 1024)
-        except (OSError, StopIteration, ValueError):
-            out.append(float(soft))
-    return max(min(out), 0.0)
 
 
 def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False,

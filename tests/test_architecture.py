@@ -20,7 +20,7 @@ PKG = ROOT / "cvxdual"
 LAYERS = [
     {"errors"},
     {"validate", "voigt"},
-    {"files", "progress"},
+    {"files", "progress", "memory"},
     {"scene"},  # what the user describes
     {"reference"},  # closed forms a scene may declare
     {"geometry"},  # meshes, pieces, loads, rigid motions

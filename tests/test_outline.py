@@ -17,6 +17,7 @@ import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
+from cvxdual.geometry import gmsh_fence
 from cvxdual.geometry.boundary import supports
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
@@ -212,23 +213,20 @@ def test_loaded_curved_part_is_not_certified():
     assert not b["guaranteed"] and any("flank-right" in r for r in b["reasons"])
 
 
-def test_missing_gmsh_is_one_line(monkeypatch, patch_outline):
+def test_missing_gmsh_is_one_line(monkeypatch, tmp_path, patch_outline):
     """Where gmsh's wheel cannot load a system library, an outline scene gets one line naming it
-    and its package; column scenes do not import gmsh at all."""
-    import builtins
-    real = builtins.__import__
-
-    def broken(name, *args, **kwargs):
-        if name == "gmsh":
-            raise OSError("libGLU.so.1: cannot open shared object file: No such file or directory")
-        return real(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", broken)
-    monkeypatch.delitem(sys.modules, "gmsh", raising=False)
+    and its package (gmsh is imported in its own process: a stand-in module first on the path
+    raises the loader's error there); column scenes do not need gmsh at all."""
+    (tmp_path / "gmsh.py").write_text('raise OSError("libGLU.so.1: cannot open shared object file: No such file")\n')
+    monkeypatch.syspath_prepend(str(tmp_path))  # the fence hands the caller's path to gmsh's process
+    gmsh_fence.stop()  # a new process, which finds the stand-in
     forget_meshes()  # a kept mesh would need no gmsh
-    with pytest.raises(MeshError, match="libGLU.*apt-get install libglu1-mesa"):
-        build_mesh(patch_outline, 0)
-    build_mesh(load_scene("patch"), 0)  # a column scene needs no gmsh
+    try:
+        with pytest.raises(MeshError, match="libGLU.*apt-get install libglu1-mesa"):
+            build_mesh(patch_outline, 0)
+        build_mesh(load_scene("patch"), 0)  # a column scene needs no gmsh
+    finally:
+        gmsh_fence.stop()  # the next process finds the real gmsh
 
 
 # -- malformed outlines: one line, exit 1, nothing written ---------------------------------------

@@ -5,9 +5,9 @@ column mesh (:mod:`cvxdual.geometry.mesh`): face nodes on the global columns, so
 contact nodes pair on vertical lines and the curved pieces of both triangulations are built as
 for column bodies. The layer's inner side is a chain of nodes at depth ``t_i`` (the local column
 spacing) below (or above) the face. The rest of the body, between that chain and the outline, is
-meshed by gmsh (its Python API) conforming to the chain: one geometry point per chain node and
-two-node transfinite lines between them, so gmsh adds no node on the chain and keeps the given
-coordinates bit for bit.
+meshed by gmsh (its Python API, in gmsh's own process: :mod:`~cvxdual.geometry.gmsh_fence`)
+conforming to the chain: one geometry point per chain node and two-node transfinite lines
+between them, so gmsh adds no node on the chain and keeps the given coordinates bit for bit.
 
 Sizes (:mod:`~cvxdual.geometry.outline_sizes`): the chain's spacing and the arcs' edges
 (``4 * 2**level`` a quarter turn), growing with the distance from them by ``0.4 / 2**level``, up
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 import time
 from dataclasses import dataclass, replace
 from functools import lru_cache
@@ -43,8 +42,9 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import MeshError
-from ..scene.geo import import_gmsh
 from ..scene.planar import inside, segments_meet
+from .gmsh_fence import in_gmsh
+from .gmsh_worker import import_gmsh
 from .outline_arcs import continuation, free_arc, gmsh_arc, match_rows
 from .outline_cut import find_cuts
 from .outline_sizes import STRIP_ASPECT, SizeField, graded_stops, steering, strip_depth
@@ -53,7 +53,6 @@ from .triangles import doubled_areas
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 ALGORITHM = 6  # gmsh's Frontal-Delaunay: the best-shaped triangles of its 2D algorithms
-_LOCK = threading.Lock()  # gmsh keeps one global model per process
 SMALL = 64  # bodies with at most this many columns are meshed on one thread (0.1 s to start a second, seen)
 
 
@@ -111,7 +110,8 @@ def gmsh_seconds() -> float:
 def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
     t = time.perf_counter()
     try:
-        rest = _gmsh_mesh(body, np.frombuffer(columns), np.frombuffer(inner_y), level)
+        rest = in_gmsh("cvxdual.geometry.outline_mesh:gmsh_mesh", body, np.frombuffer(columns),
+                       np.frombuffer(inner_y), level, what=f"meshing body {body.name!r} at level {level}")
     finally:
         _SPENT[0] += time.perf_counter() - t
     for a in (rest.points, rest.triangles, rest.virtual_nodes, rest.virtual_weight, *rest.parts.values()):
@@ -119,20 +119,20 @@ def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
     return rest
 
 
-def _gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
+def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
+    """:func:`mesh_rest`'s work, done by gmsh: runs in gmsh's own process (:mod:`~cvxdual.geometry.gmsh_fence`)."""
     gmsh = import_gmsh()
-    with _LOCK:
-        gmsh.initialize(readConfigFiles=False, interruptible=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            return _mesh(gmsh, body, columns, inner_y, level)
-        except MeshError:
-            raise
-        except Exception as e:  # gmsh reports its failures as plain exceptions
-            raise MeshError(f"gmsh could not mesh body {body.name!r} at level {level} ({e}); check its outline "
-                            "(parts very close to the face, or to each other) or change the level") from None
-        finally:
-            gmsh.finalize()
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        return _mesh(gmsh, body, columns, inner_y, level)
+    except MeshError:
+        raise
+    except Exception as e:  # gmsh reports its failures as plain exceptions
+        raise MeshError(f"gmsh could not mesh body {body.name!r} at level {level} ({e}); check its outline "
+                        "(parts very close to the face, or to each other) or change the level") from None
+    finally:
+        gmsh.finalize()
 
 
 def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
@@ -395,7 +395,13 @@ def _surfaces(geo, cuts, loop, n_path, chain_pts, holes, shape, part_curves, poi
         a = cs[i1:i2] if i1 < i2 else cs[i1:] + cs[:i2]  # near -> far, the hole's own way round
         b = cs[i2:i1] if i2 < i1 else cs[i2:] + cs[:i1]  # far -> near
         back_b = [-t for t in reversed(b)]  # near -> far, the other way
-        a_right = np.mean([shape[t][0][0][0] for t in a]) > c.end[0]
+        # a then b runs round the hole in its own direction, and down the left half then up the
+        # right one is counter-clockwise: on a downward cut (a lower body) a is the left half iff
+        # the hole runs counter-clockwise, on an upward one iff clockwise. (a's mean x against the
+        # cut's end misjudged near and far on opposite sides: a square hole was meshed twice over.)
+        hx, hy = ring(cs).T
+        ccw_hole = float(np.dot(hx, np.roll(hy, -1)) - np.dot(np.roll(hx, -1), hy)) > 0
+        a_right = ccw_hole != (c.end[1] < c.far[1])
         leg1, leg2 = straight(k_pt, at(c.near)), straight(at(c.far), h)
         left, right = (back_b, a) if a_right else (a, back_b)
         down.append(([*leg1, *left, *leg2], [*leg1, *right, *leg2]))
