@@ -199,6 +199,7 @@ class Solution:
             "objective": self.objective,
             "duality_gap": self.duality_gap,
             "load_imbalance": self.space.load_imbalance if eq else s.load_imbalance,
+            "load_correction": self.space.load_correction if eq else s.load_correction,
             "residuals": dict(self.residuals),
             "contact": {k: c[k] for k in ("n_active", "x_min", "x_max", "max_pressure", "total_force")},
             "exact": self.exact,

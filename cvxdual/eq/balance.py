@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from ..errors import SolverError
 from ..geometry.boundary import supports
 from ..geometry.mesh import Mesh
-from ..geometry.rigid import candidates, check_balance
+from ..geometry.rigid import balance_correction, candidates, carried_solve, check_balance
 from ..p0.assembly import Scales
 from .edges import outward_normals
 from .element import bary_gradients, traction_rows
@@ -95,27 +95,39 @@ def boundary_triangles(space) -> np.ndarray:
     return np.unique(space.edges["owner"][space.edges["boundary"], 0])
 
 
-def balance_loads(space) -> tuple[np.ndarray, float]:
+def balance_loads(space) -> tuple[np.ndarray, float, float]:
     """Check the data on the floating modes; return the fixed parameters with a rounding-level
-    imbalance removed from the loaded ones (least-norm change) and the relative imbalance."""
+    imbalance removed from the loaded ones, the relative imbalance and the relative size of the
+    change (:func:`cvxdual.geometry.rigid.balance_correction`: least-norm, only along the motions
+    the loaded parameters carry, refused above ``BALANCE_TOL`` of them)."""
     r = rigid_motions(space.mesh, joint=True)
     if r.shape[2] == 0:
-        return space.z_fix, 0.0
+        return space.z_fix, 0.0, 0.0
     W, bf, bf_abs = work_rows(space, r)
     sigma0 = space.sigma0
     work = W @ sigma0 + bf
     te = space.traction_edges
     size = float(np.sum(space.edges["length"][te["ids"].astype(int)] * np.abs(te["c"]).sum((1, 2)))) \
         if len(te["ids"]) else 0.0  # all the tractions' size: |c| at both ends times the length
-    total = (size + float(bf_abs.sum())) * np.abs(r).max(axis=(0, 1))
+    # all the body forces' size (not their work on the motion, which is rounding for a motion they
+    # do not push: a vertical weight on a horizontal slide)
+    _, area = bary_gradients(space.X)
+    F = np.array([bd.body_force for bd in space.scene.bodies])[space.body]
+    total = (size + float(np.sum(area * np.abs(F).sum(1)))) * np.abs(r).max(axis=(0, 1))
     imbalance = check_balance(work, np.abs(W) @ np.abs(sigma0) + bf_abs, total)
     loaded = np.flatnonzero(space.z_fix != 0)
     if len(loaded) == 0:
-        return space.z_fix, imbalance
-    G = (W @ space.vertex_map(boundary_triangles(space)))[:, loaded].toarray()
+        return space.z_fix, imbalance, 0.0
+    V = space.vertex_map(boundary_triangles(space))
+    G = (W @ V)[:, loaded].toarray()
+    # the motions are the candidates times orthonormal coefficients (rigid_motions): the loaded
+    # parameters' work on a unit combination of the candidates is at most the norm of this block
+    Wc = work_rows(space, rigid_candidates(space.mesh))[0]
+    ref = float(np.linalg.norm((Wc @ V)[:, loaded].toarray(), 2))
+    delta, change = balance_correction(G, work, ref, space.z_fix[loaded])
     z_fix = space.z_fix.copy()
-    z_fix[loaded] -= G.T @ np.linalg.lstsq(G @ G.T, work, rcond=None)[0]
-    return z_fix, imbalance
+    z_fix[loaded] -= delta
+    return z_fix, imbalance, change
 
 
 def make_scales(space) -> Scales:
@@ -149,11 +161,16 @@ def balance_contact(space, y: np.ndarray) -> tuple[np.ndarray, float]:
     if r.shape[2] == 0:
         return y, 0.0
     W, bf, _ = work_rows(space, r)
-    a = (W @ space.vertex_map(boundary_triangles(space)) @ space.Tm[:, ci]).toarray()
+    V = space.vertex_map(boundary_triangles(space)) @ space.Tm[:, ci]
+    a = (W @ V).toarray()
     resid = W @ space.vertex_values(y).ravel() + bf  # should be zero: each body in balance
     D = np.abs(p)
-    lam = np.linalg.lstsq((a * D) @ a.T, -resid, rcond=None)[0]
-    dp = D * (a.T @ lam)
+    # dp = sqrt(D) z, z the least-norm solution of (a sqrt(D)) z = -resid along the motions the
+    # contact tractions carry (a body's slide along a flat contact is not: its row is rounding);
+    # r is each body's candidates times orthonormal coefficients, so the candidates' block bounds it
+    ref = float(np.linalg.norm((work_rows(space, rigid_candidates(space.mesh))[0] @ V).toarray()
+                               * np.sqrt(D), 2))
+    dp = np.sqrt(D) * carried_solve(a * np.sqrt(D), -resid, ref)
     rel = float(np.max(np.abs(dp) / np.where(D > 0, D, 1.0))) if len(dp) else 0.0
     if rel >= 1.0:
         raise SolverError(f"the solver's contact tractions are too far from balance to be corrected "

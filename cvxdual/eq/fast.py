@@ -106,18 +106,16 @@ def column_slots(space: EquilibriumSpace) -> tuple[np.ndarray, np.ndarray]:
     return t, 4 * j[:, None] + 2 * (ge ^ ed["flip"][t, j][:, None])
 
 
-def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """``y`` indices (among the interior pairs ``pair_y``) whose multiplier is pinned, one per
-    floating motion ``r``: the kernel of ``S`` is ``mu_y = s_o * int phi_e (frame . r)`` (the
-    work of the parameter on ``r``, signed by the outward normal of its first triangle); QR
-    with column pivoting picks entries where these vectors are independent."""
-    r = rigid_motions(space.mesh, joint=True)
-    if r.shape[2] == 0:
-        return np.empty(0, int)
+def kernel_rows(space: EquilibriumSpace, r: np.ndarray, y: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """``(len(y), m)``: the multiplier of each shared parameter ``y`` in the kernel of ``S`` made by
+    each floating motion ``r``, ``mu_y = s_o * int phi_e (frame . r)`` (the work of the parameter on
+    ``r``, signed by the outward normal of its first triangle; ``first`` its first copy's flat
+    slot); 0 off the edge slots."""
+    out = np.zeros((len(y), r.shape[2]))
     ed = space.edges
-    t, slot = np.divmod(first[pair_y], 15)
+    t, slot = np.divmod(first[y], 15)
     edge = slot < 12
-    t, slot, yy = t[edge], slot[edge], pair_y[edge]
+    t, slot = t[edge], slot[edge]
     j, e, k = slot // 4, (slot % 4) // 2, slot % 2
     g = ed["id"][t, j]
     E = e ^ ed["flip"][t, j]  # global end
@@ -126,9 +124,22 @@ def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, firs
     n = ed["ng"][g]
     frame = np.where(k[:, None] == 0, n, np.stack([-n[:, 1], n[:, 0]], 1))
     s_o = 1.0 - 2.0 * ed["flip"][t, j]  # n_out = n_g when the local edge runs lo -> hi
-    W = (s_o * ed["length"][g] / 6.0)[:, None] * np.einsum("pi,pim->pm", frame, 2 * r_near + r_far)
+    out[edge] = (s_o * ed["length"][g] / 6.0)[:, None] * np.einsum("pi,pim->pm", frame, 2 * r_near + r_far)
+    return out
+
+
+def gauge_pins(space: EquilibriumSpace, ys: np.ndarray, pair_y: np.ndarray, first: np.ndarray,
+               r: np.ndarray | None = None) -> np.ndarray:
+    """``y`` indices (among the interior pairs ``pair_y``) whose multiplier is pinned, one per
+    floating motion ``r`` (:func:`kernel_rows`); QR with column pivoting picks entries where the
+    kernel vectors are independent."""
+    r = rigid_motions(space.mesh, joint=True) if r is None else r
+    if r.shape[2] == 0:
+        return np.empty(0, int)
+    edge = first[pair_y] % 15 < 12
+    W = kernel_rows(space, r, pair_y[edge], first)
     _, _, piv = sla.qr(W.T, pivoting=True, mode="economic")
-    return yy[piv[: r.shape[2]]]
+    return pair_y[edge][piv[: r.shape[2]]]
 
 
 def well_conditioned(space: EquilibriumSpace) -> np.ndarray:
@@ -192,8 +203,13 @@ class HybridSolver:
         is_contact = np.zeros(n_y, bool)
         is_contact[self.contact] = True
         interior = np.flatnonzero((self.count == 2) & ~is_contact)
-        self.pins = gauge_pins(space, self.ys, interior, self.first)
+        rho = rigid_motions(space.mesh, joint=True)
+        self.pins = gauge_pins(space, self.ys, interior, self.first, rho)
         interior = interior[~np.isin(interior, self.pins)]  # few pins: a mask, not a sort
+        # the kernel of S on the multipliers (interior ones in mu_int order, the contact ones, the
+        # pins'): the pinned continuity equations are made consistent with it (consistent())
+        self.k_int, self.k_con, self.k_pin = (kernel_rows(space, rho, y, self.first)
+                                              for y in (interior, self.contact, self.pins))
         self.mu_int = np.full(n_y, -1)
         self.mu_int[interior] = np.arange(len(interior))
         self.n_int = len(interior)
@@ -302,12 +318,15 @@ class HybridSolver:
         S = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_mu, n_mu))
         return S, f
 
-    def recover_plain(self, mu_of_y: np.ndarray, mu: np.ndarray, g: np.ndarray | None) -> np.ndarray:
-        """Local parameters ``z (n_plain, 15)`` of the plain triangles for multipliers ``mu`` and
-        divergence rows ``g``: ``w = H_w^-1 (Z^_e^T D^T rhs - Z^T H^ c_p)``."""
+    def recover_plain(self, mu_of_y: np.ndarray, mu: np.ndarray, g: np.ndarray | None,
+                      rows: np.ndarray | None = None) -> np.ndarray:
+        """Local parameters ``z (n_plain, 15)`` of the plain triangles (or of those at ``rows`` of
+        ``self.plain``) for multipliers ``mu`` and divergence rows ``g`` (of all plain triangles):
+        ``w = H_w^-1 (Z^_e^T D^T rhs - Z^T H^ c_p)``."""
         Ze, out = REF_DIVFREE[:12], []
-        for lo in range(0, len(self.plain), CHUNK):
-            c = slice(lo, lo + CHUNK)
+        n = len(self.plain) if rows is None else len(rows)
+        for lo in range(0, n, CHUNK):
+            c = slice(lo, lo + CHUNK) if rows is None else rows[lo: lo + CHUNK]
             t = self.plain[c]
             m, sg = self.slot_mu(t, np.ones((len(t), 15), bool), mu_of_y)
             rhs = -(sg * mu[np.maximum(m, 0)])[:, :12]
@@ -429,6 +448,8 @@ class HybridSolver:
         self.factor, self.S = SPDFactor(S, lower=True), S
         self.stats.backend = self.factor.method
         mu, res = self.solve_condensed(f)
+        if len(self.pins):
+            mu = self.consistent(mu, A, sep, mu_of_y)
         self.stats.factor_time += time.perf_counter() - t0
         self.stats.factorizations += 1
         self.n_mu, self.nnz = n_mu, int(S.nnz)
@@ -436,6 +457,34 @@ class HybridSolver:
             why = f"the condensed system is singular or ill-conditioned (relative residual {res:.1e})"
             raise SolverError(f"{self.what}: {why}; {self.advice[0]}", cli=f"{self.what}: {why}; {self.advice[1]}")
         return mu, sep, mu_of_y
+
+    def consistent(self, mu: np.ndarray, A: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray) -> np.ndarray:
+        """``mu`` of the right-hand side made consistent: ``f - K c`` with ``K^T (f - K c) = 0``, ``K``
+        the kernel of ``S`` (:func:`kernel_rows`) over all multipliers, the pins' included.
+
+        The pins' continuity equations are dropped, which the balanced loads imply, but ``K^T f``
+        is a sum of rounding errors over the whole mesh (``delta``): kept, it all lands on the pinned
+        parameters' copies, which then differ by ``delta`` over their small weight (the patch
+        without its symmetry supports: 8e-9 of the stress at level 4, ten times more a level), and
+        the triangles around the pins carry a self-equilibrated error of that size. The copies'
+        difference is ``K_pin^-T delta``, read from the two triangles of each pin; the change
+        ``- S^-1 K c`` (one solve with the kept factor) spreads ``delta`` over all multipliers like
+        the floating motions themselves, where it moves no stress."""
+        slots = np.concatenate([self.first[self.pins], self.second[self.pins]])
+        t, s = np.divmod(slots, 15)
+        tri = np.unique(t)
+        z = np.empty((len(tri), 15))
+        special = self.at[tri] >= 0
+        if special.any():
+            z[special] = self.recover(tri[special], sep, mu_of_y, mu)[0]
+        if not special.all():
+            z[~special] = self.recover_plain(mu_of_y, mu, self.g[self.plain],
+                                             rows=np.searchsorted(self.plain, tri[~special]))
+        values = z[np.searchsorted(tri, t), s].reshape(2, -1)
+        delta = self.k_pin.T @ (values[0] - values[1])  # K^T f: the copies differ by K_pin^-T of it
+        K = np.vstack([self.k_int, self.k_con[A]])
+        c = np.linalg.solve(K.T @ K + self.k_pin.T @ self.k_pin, delta)
+        return mu - self.factor.solve(K @ c)
 
     def close(self) -> None:
         if self.factor is not None:
@@ -486,6 +535,8 @@ class HybridSolver:
         z = np.empty((self.space.n_tri, 15))
         z[self.special] = self.recover(self.special, state["sep"], state["mu_of_y"], state["mu"],
                                        g_special, homogeneous)[0]
+        # the divergence rows of the data (body forces) unless given, as recover() reads them
+        g_plain = self.g[self.plain] if g_plain is None else g_plain
         z[self.plain] = self.recover_plain(state["mu_of_y"], state["mu"], g_plain)
         return z.ravel()[self.first]
 

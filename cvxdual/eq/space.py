@@ -112,6 +112,7 @@ class EquilibriumSpace:
     slab_column: np.ndarray  # (n_slabs,) the column of each slab of ``pieces``
     scales: Scales
     load_imbalance: float
+    load_correction: float = 0.0  # relative size of the change that balanced the loads (eq.balance)
 
     @classmethod
     def from_pieces(cls, mesh: Mesh, pieces: Pieces, triangulation: str) -> "EquilibriumSpace":
@@ -493,8 +494,8 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
                              column_dofs=cl["raw_n"][columns],
                              column_energy_blocks=column_energy(pieces, faces, slab_iv, compliance)[columns],
                              slab_column=where[slab_iv], scales=Scales(1.0, 1.0, 1.0), load_imbalance=0.0)
-    z_fix, imbalance = balance_loads(space)
-    space = replace(space, z_fix=z_fix, load_imbalance=imbalance)
+    z_fix, imbalance, correction = balance_loads(space)
+    space = replace(space, z_fix=z_fix, load_imbalance=imbalance, load_correction=correction)
     return replace(space, scales=make_scales(space))
 
 

@@ -3,8 +3,9 @@
 
 A semi-coercive scene (a body held only by contact) has rigid motions in ``V_h``. Those
 that keep the bodies together (*floating*) must receive no work from the loads: the small
-quadrature imbalance is removed and reported, a real one is an error, and one equilibrium
-row per floating motion is dropped (the *anchors*). Those that open the contact
+quadrature imbalance is removed (only along motions the loaded dofs carry, by a change bounded by
+``BALANCE_TOL`` of the loads) and reported, a real one is an error, and one equilibrium row per
+floating motion is dropped (the *anchors*). Those that open the contact
 (*separating*) must not be driven by the loads, or no admissible stress exists.
 """
 
@@ -24,19 +25,29 @@ BALANCE_TOL = 1e-6
 # of their size, 1e-16 to 1e-14 of it: measured against 1e-8 of all the loads' work it stays under
 # BALANCE_TOL, while any real load on the motion above 1e-14 of the total is still caught.
 ROUNDING = 1e-8
+# A combination of floating motions moves the loaded dofs by singular value s of their block; a
+# unit combination of the six candidate motions moves them by at most ref (the block's norm). Below
+# CARRIED * ref the loaded dofs do not carry the motion: a slide across the loads' direction leaves
+# rounding there (~1e-16 ref), while any genuine motion of a loaded point moves it by its distance
+# to the rotation centre over L (>= 1e-6 of ref for meshes double precision resolves). It is the
+# threshold that found the modes (rows under 1e-9 of the largest singular value count as zero):
+# the modes are not known more precisely than that.
+CARRIED = 1e-9
 
 
 @dataclass(frozen=True)
 class RigidModes:
     """``floating`` ``(n_r, m)`` and ``separating`` ``(n_r, m2)`` motions in r, the ``anchors``
-    (r indices whose equilibrium rows are dropped), the balanced loads ``f`` and the relative
-    work ``load_imbalance`` the raw loads did on the floating motions."""
+    (r indices whose equilibrium rows are dropped), the balanced loads ``f``, the relative
+    work ``load_imbalance`` the raw loads did on the floating motions and the relative size
+    ``load_correction`` of the change that balanced them (``|df| / |f|``)."""
 
     floating: np.ndarray
     separating: np.ndarray
     anchors: np.ndarray
     f: np.ndarray
     load_imbalance: float
+    load_correction: float = 0.0
 
 
 def candidates(mesh) -> np.ndarray:
@@ -80,23 +91,23 @@ def rigid_modes(mesh, pieces, sup, rdof: np.ndarray, ja: np.ndarray, jb: np.ndar
     null = vt[s <= 1e-9 * s[0]].T if s[0] > 0 else np.eye(6)
     empty = np.empty((n_r, 0))
     if null.shape[1] == 0:
-        return RigidModes(empty, empty, np.empty(0, int), f, 0.0)
+        return RigidModes(empty, empty, np.empty(0, int), f, 0.0, 0.0)
     modes = in_frames[first] @ null  # (n_r, m)
     D = modes[jb] - modes[ja]
     D = np.vstack([D, np.zeros((max(0, D.shape[1] - len(D)), D.shape[1]))])  # at least m rows: vt2 is m x m
     _, s2, vt2 = np.linalg.svd(D, full_matrices=False)  # never the n_pairs^2 U
     rank = int(np.sum(s2 > 1e-9 * max(s2[0] if len(s2) else 0.0, 1.0)))
     floating, separating = modes @ vt2[rank:].T, modes @ vt2[:rank].T
-    anchors, imbalance = np.empty(0, int), 0.0
+    anchors, imbalance, correction = np.empty(0, int), 0.0, 0.0
     if floating.shape[1]:
-        f, imbalance = _balance(Z @ floating, f)
+        f, imbalance, correction = _balance(Z @ floating, f, cand)
         keep = np.ones(n_r, bool)
         keep[jb] = False  # anchors off the pairs' lower dofs (those the fast path eliminates)
         J0 = np.flatnonzero(keep)
         anchors = np.sort(J0[pivot_columns(floating[J0].T)])
     if separating.shape[1]:
         _check_separation(Z @ separating, separating[jb] - separating[ja], f)
-    return RigidModes(floating, separating, anchors, f, imbalance)
+    return RigidModes(floating, separating, anchors, f, imbalance, correction)
 
 
 def pivot_columns(A: np.ndarray) -> np.ndarray:
@@ -128,19 +139,49 @@ def check_balance(work: np.ndarray, scale: np.ndarray, total: np.ndarray) -> flo
     return rel
 
 
-def _balance(Q: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, float]:
-    """Remove the loads' small work on the floating motions ``Q`` ``(n_dofs, m)``."""
+def _balance(Q: np.ndarray, f: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Remove the loads' small work on the floating motions ``Q`` ``(n_dofs, m)`` (combinations of
+    the candidates ``cand`` with orthonormal coefficients): ``(f, load_imbalance, load_correction)``."""
     work = Q.T @ f
     rel = check_balance(work, np.abs(Q).T @ np.abs(f), np.abs(f).sum() * np.abs(Q).max(axis=0, initial=0.0))
     loaded = f != 0
     if not np.any(loaded):
-        return f, rel
-    Ql = Q[loaded]
+        return f, rel, 0.0
     # remove the imbalance on the loaded dofs only, so unloaded boundary stays free
-    coef = np.linalg.lstsq(Ql.T @ Ql, work, rcond=None)[0]
+    delta, size = balance_correction(Q[loaded].T, work, np.linalg.norm(cand[loaded], 2), f[loaded])
     f = f.copy()
-    f[loaded] -= Ql @ coef
-    return f, rel
+    f[loaded] -= delta
+    return f, rel, size
+
+
+def balance_correction(G: np.ndarray, work: np.ndarray, ref: float, loads: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-norm change ``delta`` of the loaded values ``loads`` that removes their work ``work``
+    ``(m,)`` on the floating motions (``G`` ``(m, n_l)``: the work of each loaded value on each
+    motion) along the motions they carry (:func:`carried_solve`). Returns ``delta`` and
+    ``|delta| / |loads|``; a change above :data:`BALANCE_TOL` of the loads is an
+    :class:`UnbalancedLoadError`, never applied."""
+    delta = carried_solve(G, work, ref)
+    size = float(np.linalg.norm(delta) / max(float(np.linalg.norm(loads)), 1e-300))
+    if size > BALANCE_TOL:
+        raise UnbalancedLoadError(
+            f"balancing the loads on the rigid motion(s) that keep the bodies in contact would change them by "
+            f"{size:.3g} of their size (> {BALANCE_TOL:g}): balance the loads or add a support (clamped or "
+            "sliding) that removes the motion")
+    return delta, size
+
+
+def carried_solve(G: np.ndarray, rhs: np.ndarray, ref: float) -> np.ndarray:
+    """The least-norm ``x`` with ``(G x)`` equal to ``rhs`` along the combinations of rigid motions
+    (rows of ``G`` ``(m, n)``, the motions being the candidates times orthonormal coefficients) that
+    the values ``x`` carry: singular values of ``G`` above :data:`CARRIED` ``* ref``, ``ref`` the
+    largest a unit combination of the candidates gives. Along the others ``rhs`` is ``s`` times
+    the values, rounding, and dividing it by ``s`` would return a change as large as the values
+    themselves (a floating slide across vertical loads: 4e-15 / 5e-32); it is left as it is."""
+    if G.size == 0:
+        return np.zeros(G.shape[1])
+    U, s, Vt = np.linalg.svd(G, full_matrices=False)
+    keep = s > CARRIED * ref
+    return Vt[keep].T @ ((U[:, keep].T @ rhs) / s[keep])
 
 
 def _check_separation(Q: np.ndarray, dk: np.ndarray, f: np.ndarray) -> None:

@@ -58,6 +58,7 @@ class System:
     C: np.ndarray  # (n_pieces, 3, 3) Hooke matrix of each piece
     f: np.ndarray  # (n_dofs,) load vector, balanced on the floating modes
     load_imbalance: float  # relative work of the raw loads on the floating modes
+    load_correction: float  # |df| / |f| of the change that balanced them (geometry.rigid.balance_correction)
     supports: Supports  # fixed components and node frames
     rdof: np.ndarray  # (n_dofs,) index in r of each node's frame component, or -1 if fixed
     Z: sp.csr_matrix  # (n_dofs, n_r): q = Z r
@@ -189,6 +190,7 @@ def assemble(mesh: Mesh, pieces: Pieces, ties: np.ndarray | None = None) -> Syst
     eps = scene.gap_at(mesh.pair_x)
     modes = rigid_modes(mesh, pieces, sup, rdof, ja, jb, Z, load_vector(mesh, pieces))
     return System(mesh=mesh, pieces=pieces, E=E, Ah=Ah, C=C, f=modes.f, load_imbalance=modes.load_imbalance,
+                  load_correction=modes.load_correction,
                   supports=sup, rdof=rdof, Z=Z, ja=ja, jb=jb, eps=eps, width=tributary(mesh.pair_x),
                   anchors=modes.anchors, floating=modes.floating, separating=modes.separating,
                   scales=problem_scales(scene, modes.f, eps))
