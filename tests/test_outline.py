@@ -318,7 +318,7 @@ GEO_BAD = [
     ("geo face of two curves", GEO_BLOCK.replace("Line(1) = {4, 1};", "Point(9) = {0, 0, 0};\nLine(1) = {4, 9};\n"
                                                  "Line(5) = {9, 1};")
      + NAMES.replace("{1}", "{1, 5}") + 'Physical Curve("left") = {4};', "the face is 2 curves"),
-    ("geo open", GEO_BLOCK + NAMES, "is open"),
+    ("geo open", GEO_BLOCK + NAMES, "curve 4 is in no physical curve"),
     ("geo syntax", "Point(1) = {10, 0", "cannot read"),
 ]
 

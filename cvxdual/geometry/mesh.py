@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import MeshError
 from ..scene.scene import Body, Scene
 from ..validate import short
+from .mesh_check import check_body_mesh
 from .outline_mesh import RestMesh, held_parts, mesh_rest
 from .outline_sizes import strip_depth
 
@@ -325,6 +326,8 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
             inner = body.face.value(c) + body.sign * strip_depth(c)
             rest = mesh_rest(body, c, inner, level)
             bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest)
+            # a wrong loop handed to gmsh meshes the wrong region without an error: check it against the outline
+            check_body_mesh(body, bm.points(), bm.triangles() - offset, bm.side_nodes("face") - offset, rest.parts)
         bms.append(bm)
         pts.append(bm.points())
         offset += bm.n_nodes

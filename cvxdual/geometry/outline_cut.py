@@ -74,6 +74,8 @@ def _try(k, start, sign, path, holes, segs, owner, hole_of, size) -> Cut | None:
     out = max((yy for ii, yy in hits if hole_of[owner[ii]] == h), key=lambda v: sign * v)  # where the ray leaves it
     near = starts[np.argmin(np.hypot(*(starts - [start[0], y]).T))]
     far = starts[np.argmin(np.hypot(*(starts - [start[0], out]).T))]
+    if np.array_equal(near, far):
+        return None  # no two halves to share out
     after = [(ii, yy) for ii, yy in _ray(segs, far, sign) if sign * (yy - far[1]) > 0]
     if not after or hole_of[owner[after[0][0]]] >= 0:
         return None

@@ -12,8 +12,9 @@ The paper only asks the contact arcs to be graphs with paired face nodes (its ``
 the rest with gmsh (:mod:`cvxdual.geometry.outline_mesh`).
 
 Validation here is geometric and complete before any meshing: the path must close on the face,
-no two segments (face included) may cross or touch except at shared ends, holes must lie inside,
-names must be unique.
+no two segments (face included) may cross, touch or be tangent except consecutive ones at their
+shared end, and those must not run back over each other; holes must enclose an area, lie inside
+the body and not inside each other; names must be unique.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..validate import number, pair, short, text
-from .planar import inside, meeting_pairs, signed_area
+from .planar import inside, near_pairs, point_segment_distance, segment_distance, signed_area
 
 ARC_SAMPLES = 64  # points per arc when checking crossings and drawing (a chord error of 1e-4 of the radius)
 FACE_SAMPLES = 2001  # points of the face in the crossing checks
@@ -198,6 +199,10 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
                 raise SceneError(f"{w}.through must list 1 to {MAX_PARTS} points [[x, y], ...], got "
                                  f"{short(d['through'])}")
             through = tuple(_point(q, f"{w}.through[{j}]") for j, q in enumerate(d["through"]))
+            twice = _repeated_knot((cur, *through, end))
+            if twice is not None:
+                raise SceneError(f"{w}: the spline passes through ({twice[0]:g}, {twice[1]:g}) twice in a row; "
+                                 "give each of its points once")
         parts.append(Part(text(d["name"], f"{w}.name"), (Segment(cur, end, center, through),)))
         cur = end
     if holes is None:
@@ -213,7 +218,10 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
         keys = set(d) - {"name"}
         name = text(d["name"], f"{w}.name")
         if keys == {"center", "radius"}:
-            hs.append(circle(name, _point(d["center"], f"{w}.center"), number(d["radius"], f"{w}.radius", "positive")))
+            r = number(d["radius"], f"{w}.radius", "positive")
+            if r <= 0:
+                raise SceneError(f"{w}.radius must be positive, got {r:g}; give the hole's radius")
+            hs.append(circle(name, _point(d["center"], f"{w}.center"), r))
         elif keys == {"points"}:
             pts = d["points"]
             if not isinstance(pts, list) or len(pts) < 3:
@@ -230,22 +238,40 @@ def outline_from_dict(path, holes, start: tuple[float, float], where: str) -> Ou
 
 def circle(name: str, center, radius: float) -> Part:
     """A circular hole as four quarter arcs, starting at its right-most point."""
+    if not radius > 0:  # a negative one would draw the circle of its magnitude
+        raise SceneError(f"hole {short(name)}: radius must be positive, got {radius!r}; give the hole's radius")
     cx, cy = center
     q = [(cx + radius, cy), (cx, cy + radius), (cx - radius, cy), (cx, cy - radius)]
     return Part(name, tuple(Segment(q[j], q[(j + 1) % 4], (cx, cy)) for j in range(4)))
 
 
-def _loop_polyline(face_pts: np.ndarray, outline: Outline):
-    """The closed boundary as polylines: ``(chains, owner)``: every chain is ``(k, 2)`` sampled
-    points, ``owner`` its part name (``"face"`` for the face)."""
-    chains = [(face_pts, "face")]
-    chains += [(s.sample(), p.name) for p in outline.parts for s in p.segments]
-    return chains
+def _repeated_knot(knots) -> tuple[float, float] | None:
+    """A spline's point that equals the next one (no chord length to run along), or None."""
+    k = np.asarray(knots, float)
+    same = np.hypot(*np.diff(k, axis=0).T) <= 1e-12 * np.abs(k).max()  # equal to rounding
+    return tuple(k[int(np.argmax(same))]) if np.any(same) else None
+
+
+def _loops(face_pts: np.ndarray, outline: Outline):
+    """The closed boundary as sampled polylines: ``(chains, follow)``: every chain is ``(points,
+    name)`` (the face, each segment of the path, each of the holes'; ``"face"`` the face's
+    name), ``follow`` the pairs of chains where one ends and the next starts along a loop (the
+    face, the path and back; round each hole)."""
+    chains = [(face_pts, "face")] + [(s.sample(), p.name) for p in outline.parts for s in p.segments]
+    n = sum(len(p.segments) for p in outline.path)
+    follow = [(i, i + 1) for i in range(n)] + [(n, 0)]
+    k = n + 1
+    for h in outline.holes:
+        m = len(h.segments)
+        follow += [(k + j, k + (j + 1) % m) for j in range(m)]
+        k += m
+    return chains, follow
 
 
 def check_outline(outline: Outline, face, x_range, position: str, body: str) -> None:
     """Raise :class:`SceneError` (one line) unless the outline closes on the face, encloses a
-    region on the body's side of the face, and no two of its segments cross."""
+    region on the body's side of the face, every hole encloses an area inside it (not inside
+    another hole), and no two of its segments cross, touch or run back over each other."""
     x0, x1 = x_range
     left, right = (x0, float(face.value(x0))), (x1, float(face.value(x1)))
     names = outline.names
@@ -254,6 +280,12 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
         raise SceneError(f"body {short(body)}: outline part {dup[0]!r} is named twice; give every part its own name")
     if "face" in names:
         raise SceneError(f"body {short(body)}: 'face' is the contact face's own name; name the outline part otherwise")
+    for p in outline.parts:  # before anything samples a spline: scipy refuses a repeated point with a traceback
+        for s in p.segments:
+            twice = _repeated_knot((s.start, *s.through, s.end)) if s.is_spline else None
+            if twice is not None:
+                raise SceneError(f"body {short(body)}: spline {p.name!r} passes through ({twice[0]:g}, {twice[1]:g}) "
+                                 "twice in a row; give each of its points once")
     xs = np.linspace(x0, x1, FACE_SAMPLES)
     face_pts = np.stack([xs, face.value(xs)], 1)
     scale = float(np.ptp(np.concatenate([face_pts, outline.points()]), axis=0).max())
@@ -266,9 +298,16 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
         raise SceneError(f"body {short(body)}: the outline is open: its last part {outline.path[-1].name!r} ends at "
                          f"({end[0]:g}, {end[1]:g}), not at the face's left end ({left[0]:g}, {left[1]:g}); "
                          "end the path there")
+    holes = set(outline.holes)
     for p in outline.parts:
         for s in p.segments:
             if math.dist(s.start, s.end) <= tol:
+                if p in holes and s.is_arc:
+                    raise SceneError(f"body {short(body)}: hole {p.name!r} is too small for the body (radius "
+                                     f"{math.dist(s.start, s.center):.3g}); enlarge it or drop it")
+                if p in holes:
+                    raise SceneError(f"body {short(body)}: hole {p.name!r} repeats the point ({s.start[0]:g}, "
+                                     f"{s.start[1]:g}); give each of its corners once")
                 raise SceneError(f"body {short(body)}: outline part {p.name!r} has zero length; drop it")
             if s.is_arc:
                 r0, r1 = math.dist(s.start, s.center), math.dist(s.end, s.center)
@@ -278,7 +317,12 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
                 if abs(s.angles()[1]) > math.pi * (1 - 1e-9):
                     raise SceneError(f"body {short(body)}: arc {p.name!r} turns half a circle or more; split it into "
                                      "two parts (each arc turns less than 180 degrees)")
-    _check_crossings(_loop_polyline(face_pts, outline), tol, body)
+    rings = [np.concatenate([s.sample() for s in h.segments]) for h in outline.holes]
+    for h, r in zip(outline.holes, rings, strict=True):
+        if abs(signed_area(r)) <= 1e-9 * float(np.ptp(r, axis=0).max()) ** 2:  # zero to rounding, at its size
+            raise SceneError(f"body {short(body)}: hole {h.name!r} encloses no area (its points lie on one line); "
+                             "give it a width or drop it")
+    _check_crossings(*_loops(face_pts, outline), tol, body)
     # area sign of the closed path (face left-to-right, then the path): lower bodies run clockwise
     ring = np.concatenate([face_pts] + [s.sample()[1:] for p in outline.path for s in p.segments])
     area = signed_area(ring)
@@ -286,40 +330,83 @@ def check_outline(outline: Outline, face, x_range, position: str, body: str) -> 
         side = "above" if position == "upper" else "below"
         raise SceneError(f"body {short(body)}: the outline does not enclose a region {side} the face (a {position} "
                          "body); start at the face's right end and go round the body back to its left end")
-    for h in outline.holes:
-        pts = np.concatenate([s.sample() for s in h.segments])
+    for h, pts in zip(outline.holes, rings, strict=True):
         if not np.all(inside(ring, pts)):
             raise SceneError(f"body {short(body)}: hole {h.name!r} is not inside the body; move it inside the outline")
+    # no hole inside another: with no crossings, one point of a hole tells (the region between is not the body's)
+    firsts = np.array([r[0] for r in rings]).reshape(-1, 2)
+    for j, (h, r) in enumerate(zip(outline.holes, rings, strict=True)):
+        within = np.flatnonzero(inside(r, firsts) & (np.arange(len(rings)) != j))
+        if len(within):
+            raise SceneError(f"body {short(body)}: hole {outline.holes[within[0]].name!r} lies inside hole {h.name!r} "
+                             f"(an island, not part of the body); drop {outline.holes[within[0]].name!r}")
 
 
-def _check_crossings(chains, tol, body) -> None:
-    """No two segments of the sampled outline meet, but neighbours at their shared end (the first
-    offending pair in index order is named)."""
-    segs, owner, idx = [], [], []
+def _check_crossings(chains, follow, tol, body) -> None:
+    """No two segments of the sampled outline meet, but consecutive ones along a loop, which meet
+    at their shared end and must not run back over each other there. Segments of parts that are not
+    consecutive must also keep clear of each other by the samples' chord error (two tangent circles'
+    polygons stay a sagitta apart); consecutive parts only by rounding (a face's fine samples lie
+    closer than a large arc's sagitta to the arc that continues it). The first pair is named."""
+    segs, owner, chain, pos, sag = [], [], [], [], []
     for k, (pts, name) in enumerate(chains):
+        d = np.diff(pts, axis=0)
+        length = np.hypot(*d.T)
+        # a segment's chord error: its length times the turn at its ends over 8 (c^2 / (8 R) on an arc)
+        turn = np.abs(np.arctan2(d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0], np.sum(d[:-1] * d[1:], axis=1)))
+        turn = np.maximum(np.concatenate([[0.0], turn]), np.concatenate([turn, [0.0]]))
         segs.append(np.stack([pts[:-1], pts[1:]], 1))
-        owner += [name] * (len(pts) - 1)
-        idx.append(np.full(len(pts) - 1, k))
+        owner += [name] * len(d)
+        chain.append(np.full(len(d), k))
+        pos.append(np.arange(len(d)))
+        sag.append(length * turn / 8)
     S = np.concatenate(segs)
-    n = len(S)
-    chain = np.concatenate(idx)
-    pos = np.concatenate([np.arange(len(s)) for s in segs])
-    # chain ends that coincide (a part's end and the next part's start): their end segments may touch
+    chain, pos = np.concatenate(chain), np.concatenate(pos)
+    # twice the chord error: the curvature varies along a spline's or the face's samples
+    reach = tol + 2 * np.concatenate(sag)
     first = np.cumsum([0] + [len(s) for s in segs[:-1]])
     last = first + np.array([len(s) for s in segs]) - 1
-    end_pts = np.concatenate([[c[0] for c, _ in chains], [c[-1] for c, _ in chains]])
-    end_seg = np.concatenate([first, last])
-    u, v = np.nonzero(np.triu(np.hypot(*(end_pts[:, None] - end_pts[None]).T) <= tol, 1))
-    ok = np.minimum(end_seg[u], end_seg[v]) * n + np.maximum(end_seg[u], end_seg[v])
-    pairs = meeting_pairs(S, tol)
+    n = len(S)
+    # consecutive segments (lead, next): along each chain, and from a chain's last to the next one's first
+    inner = np.flatnonzero(np.concatenate([np.diff(chain) == 0, [False]]))
+    lead = np.concatenate([inner, [last[u] for u, _ in follow]]).astype(np.int64)
+    nxt = np.concatenate([inner + 1, [first[v] for _, v in follow]]).astype(np.int64)
+    pairs = near_pairs(S, reach)
     a, b = pairs[:, 0], pairs[:, 1]
-    ends_ok = np.isin(a * n + b, ok)
-    neighbours = (chain[a] == chain[b]) & (np.abs(pos[a] - pos[b]) <= 1)  # samples of one part
-    bad = np.flatnonzero(~ends_ok & ~neighbours)
+    adjacent = np.isin(a * n + b, np.minimum(lead, nxt) * n + np.maximum(lead, nxt))
+    m = len(chains)
+    linked = (chain[a] == chain[b]) | np.isin(np.minimum(chain[a], chain[b]) * m + np.maximum(chain[a], chain[b]),
+                                               [min(u, v) * m + max(u, v) for u, v in follow])
+    thr = np.where(linked, 2 * tol, reach[a] + reach[b])
+    bad = np.flatnonzero(~adjacent & (segment_distance(S[a, 0], S[a, 1], S[b, 0], S[b, 1]) <= thr))
     if len(bad):
-        a, b = int(a[bad[0]]), int(b[bad[0]])
-        what = (f"part {owner[a]!r} crosses itself" if owner[a] == owner[b] else
-                f"parts {owner[a]!r} and {owner[b]!r} cross or touch")
-        where = S[a].mean(0)
-        raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near "
-                         f"({where[0]:.6g}, {where[1]:.6g}); fix the outline")
+        i, j = int(a[bad[0]]), int(b[bad[0]])
+        what = (f"part {owner[i]!r} touches itself" if owner[i] == owner[j] else
+                f"parts {owner[i]!r} and {owner[j]!r} cross or touch")
+        where = _closest(S[i], S[j])
+        raise SceneError(f"body {short(body)}: the outline is self-intersecting: {what} near ({where[0]:.6g}, "
+                         f"{where[1]:.6g}); move them apart (a boundary passes each point once)")
+    # consecutive segments fold when either's far end lies on the other: the boundary runs back over itself
+    fold = np.flatnonzero((point_segment_distance(S[lead, 0], S[nxt, 0], S[nxt, 1]) <= 2 * tol)
+                          | (point_segment_distance(S[nxt, 1], S[lead, 0], S[lead, 1]) <= 2 * tol))
+    if len(fold):
+        i, j = int(lead[fold[0]]), int(nxt[fold[0]])
+        what = f"part {owner[i]!r}" if owner[i] == owner[j] else f"parts {owner[i]!r} and {owner[j]!r}"
+        where = S[i, 1]
+        raise SceneError(f"body {short(body)}: the outline runs back over itself: {what} retrace each other at "
+                         f"({where[0]:.6g}, {where[1]:.6g}); redraw them so that the boundary passes each point once")
+
+
+def _closest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Where the segments ``a`` and ``b`` ``(2, 2)`` come nearest: their crossing, or the end of
+    either nearest the other."""
+    da, db = a[1] - a[0], b[1] - b[0]
+    den = da[0] * db[1] - da[1] * db[0]
+    if den != 0:
+        w = b[0] - a[0]
+        t, u = (w[0] * db[1] - w[1] * db[0]) / den, (w[0] * da[1] - w[1] * da[0]) / den
+        if 0 <= t <= 1 and 0 <= u <= 1:
+            return a[0] + t * da
+    ends = np.concatenate([a, b])
+    d = np.concatenate([point_segment_distance(a, b[0], b[1]), point_segment_distance(b, a[0], a[1])])
+    return ends[int(np.argmin(d))]

@@ -1,5 +1,5 @@
 """Plane geometry predicates on polylines, vectorised: signed area, segments meeting, the
-segment pairs of one set that meet (a sweep over ``x``), point in polygon.
+segment pairs of one set that meet or come near (a sweep over ``x``), distances, point in polygon.
 
 Used by the outline checks (:mod:`cvxdual.scene.outline`) and by the meshing of outline bodies
 (:mod:`cvxdual.geometry`); numpy only, so checking a scene imports nothing heavy.
@@ -44,12 +44,32 @@ def meeting_pairs(segs: np.ndarray, tol: float) -> np.ndarray:
     Only pairs whose ``x`` ranges overlap are tested: sorted by their left ends, segment ``i``'s
     candidates are the run of segments starting before its right end, so an outline (mostly
     short, disjoint pieces) costs about linear time, in blocks of :data:`PAIR_BLOCK` pairs."""
+    found = []
+    for a, b in _boxes_meeting(segs, tol):
+        hit = meet(segs[a, 0], segs[a, 1], segs[b, 0], segs[b, 1], tol)
+        found.append(np.sort(np.stack([a[hit], b[hit]], 1), axis=1))
+    pairs = np.concatenate(found) if found else np.zeros((0, 2), int)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def near_pairs(segs: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """``(k, 2)`` index pairs ``i < j`` of the segments ``segs`` ``(n, 2, 2)`` at most
+    ``reach[i] + reach[j]`` apart (crossing, touching or closer), sorted; as :func:`meeting_pairs`."""
+    found = []
+    for a, b in _boxes_meeting(segs, 2 * float(np.max(reach, initial=0.0))):
+        close = segment_distance(segs[a, 0], segs[a, 1], segs[b, 0], segs[b, 1]) <= reach[a] + reach[b]
+        found.append(np.sort(np.stack([a[close], b[close]], 1), axis=1))
+    pairs = np.concatenate(found) if found else np.zeros((0, 2), int)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _boxes_meeting(segs: np.ndarray, tol: float):
+    """Blocks ``(a, b)`` of index pairs of the segments whose bounding boxes meet (up to ``tol``)."""
     lo, hi = segs.min(axis=1), segs.max(axis=1)
     order = np.argsort(lo[:, 0], kind="stable")
     stop = np.searchsorted(lo[order, 0], hi[order, 0] + tol, side="right")
     count = np.maximum(stop - np.arange(len(segs)) - 1, 0)
     total = np.concatenate([[0], np.cumsum(count)])
-    found = []
     k = 0
     while k < len(segs):  # rows k .. e - 1 hold at most PAIR_BLOCK pairs (or one row)
         e = max(k + 1, int(np.searchsorted(total, total[k] + PAIR_BLOCK, side="right")) - 1)
@@ -57,12 +77,25 @@ def meeting_pairs(segs: np.ndarray, tol: float) -> np.ndarray:
         cols = rows + 1 + np.arange(len(rows)) - np.repeat(total[k:e] - total[k], count[k:e])
         a, b = order[rows], order[cols]
         near = np.all((lo[a] <= hi[b] + tol) & (lo[b] <= hi[a] + tol), axis=1)
-        a, b = a[near], b[near]
-        hit = meet(segs[a, 0], segs[a, 1], segs[b, 0], segs[b, 1], tol)
-        found.append(np.sort(np.stack([a[hit], b[hit]], 1), axis=1))
+        yield a[near], b[near]
         k = e
-    pairs = np.concatenate(found) if found else np.zeros((0, 2), int)
-    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def point_segment_distance(p, a, b):
+    """The distance of the points ``p`` to the segments ``a -> b`` (broadcast arrays ``(..., 2)``)."""
+    d = b - a
+    t = np.clip(np.sum((p - a) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(p - a - t[..., None] * d, axis=-1)
+
+
+def segment_distance(a0, a1, b0, b1):
+    """The distance between the segments ``a0 -> a1`` and ``b0 -> b1`` (broadcast arrays
+    ``(..., 2)``): zero where they cross, else the least of their ends' distances to the other."""
+    da, db = a1 - a0, b1 - b0
+    cross = (_cross(da, b0 - a0) * _cross(da, b1 - a0) < 0) & (_cross(db, a0 - b0) * _cross(db, a1 - b0) < 0)
+    d = np.minimum(np.minimum(point_segment_distance(a0, b0, b1), point_segment_distance(a1, b0, b1)),
+                   np.minimum(point_segment_distance(b0, a0, a1), point_segment_distance(b1, a0, a1)))
+    return np.where(cross, 0.0, d)
 
 
 def inside(ring: np.ndarray, p):

@@ -80,11 +80,16 @@ def merge(base: dict, over: dict) -> dict:
             out[k] = {**{key: b[key] for key in ("on", "interval") if key in b}, **copy.deepcopy(v)}
         elif isinstance(v, dict) and isinstance(b, dict) and not _replaces(b, v):
             out[k] = merge(b, v)
-        elif isinstance(v, dict) and isinstance(b, list) and v and all(str(i).isdigit() for i in v):
+        elif isinstance(v, dict) and isinstance(b, list) and v and all(_is_index(i) for i in v):
             out[k] = _merge_items(b, v, k)
         else:
             out[k] = copy.deepcopy(v)
     return out
+
+
+def _is_index(key) -> bool:
+    """An item number of a list: ASCII digits only (``str.isdigit`` also takes digits ``int`` refuses, as ``²``)."""
+    return str(key).isascii() and str(key).isdigit()
 
 
 def _merge_items(items: list, over: dict, key: str) -> list:
@@ -117,6 +122,10 @@ def parse_assignment(text: str) -> dict:
     for part in reversed(key.strip().split(".")):
         if not part:
             raise SceneError(f"--set: bad key {short(key)}")
+        # an item of a list is numbered with ASCII digits: int() refuses the other digits str.isdigit accepts
+        if part.strip().lstrip("+-").isnumeric() and not (part.isascii() and part.isdigit()):
+            raise SceneError(f"--set: bad key {short(key)}: {short(part)} is not a list index; items are numbered "
+                             "from 0 with the digits 0-9 (e.g. bodies.bottom.holes.0.radius=1.0)")
         d = {part: d}
     return d
 
@@ -262,7 +271,7 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         _check_depth(o, "an override")
         if isinstance(o, dict) and "base" in o:
             raise SceneError("an override cannot change 'base'; start from the other scene instead")
-        data = merge(data, table(o, "an override"))
+        data = merge(data, _resolve_geo(copy.deepcopy(table(o, "an override")), None))
     scene = scene_from_dict(data)
     # The exact field solves the scene of the outermost file with an [exact] table: a file that
     # starts from that one, and the overrides, change the problem without making the field solve it.
@@ -278,14 +287,42 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
 
 
 def _resolve_geo(data: dict, holder: Path | None) -> dict:
-    """``bodies.*.geo`` paths made relative to the directory of the file that holds them (the
-    working directory for a dict or an override)."""
+    """``bodies.*.geo`` paths resolved in the folder of the file that holds them (the working
+    directory for a dict or an override): a scene reads regular ``.geo`` files in its own folder
+    (or below it), never elsewhere, whatever the path or a link in it says."""
     bodies = data.get("bodies")
-    if isinstance(bodies, dict):
-        for b in bodies.values():
-            if isinstance(b, dict) and isinstance(b.get("geo"), str):
-                p = Path(b["geo"]).expanduser()
-                b["geo"] = str(p if p.is_absolute() or holder is None else holder.parent / p)
+    if not isinstance(bodies, dict):
+        return data
+    folder = (holder.parent if holder is not None else Path.cwd()).resolve()
+    home = "the scene file's folder" if holder is not None else "the working directory"
+    for name, b in bodies.items():
+        if not (isinstance(b, dict) and isinstance(b.get("geo"), str)):
+            continue
+        where, ref = f"bodies.{name}.geo", b["geo"]
+        path = Path(ref).expanduser()
+        if path.suffix.lower() != ".geo":
+            raise SceneError(f"{where}: {short(ref)} is not a .geo file ({path.suffix or 'no suffix'}); a body reads "
+                             "only a .geo file drawn with points, lines, arcs and splines (docs/scenes.md)")
+        try:
+            target = (folder / path).resolve()  # an absolute path stays itself; links and .. are followed
+        except (OSError, RuntimeError, ValueError) as e:  # a loop of links, a NUL in the path
+            raise SceneError(f"{where}: {short(ref)} cannot be followed ({short(str(e))}); give a plain path to a "
+                             ".geo file") from None
+        if not target.is_relative_to(folder):
+            raise SceneError(f"{where}: {short(ref)} is outside {home} {_path_text(folder)}; put the .geo file in "
+                             "that folder (or below it) and give its path relative to it")
+        try:
+            mode = target.stat().st_mode
+        except (FileNotFoundError, NotADirectoryError):
+            raise SceneError(f"{where}: no file {short(ref)} in {home} {_path_text(folder)}; give the path of a .geo "
+                             "file relative to it") from None
+        except OSError as e:
+            raise SceneError(f"{where}: {short(ref)} cannot be read ({e.strerror or e}); check its "
+                             "permissions") from None
+        if not stat.S_ISREG(mode):
+            raise SceneError(f"{where}: {short(ref)} is not a regular file (a directory, FIFO or device); give a .geo "
+                             "file")
+        b["geo"] = str(target)
     return data
 
 
