@@ -22,6 +22,7 @@ from cvxdual.geometry.outline_sizes import strip_depth
 
 ROOT = Path(__file__).resolve().parents[1]
 SLOW_LEVEL = 6  # block-with-hole: gmsh meshes for several seconds at this level
+FENCED = "cvxdual.geometry.outline_mesh:gmsh_mesh"
 
 
 def digest(mesh) -> str:
@@ -79,7 +80,7 @@ def test_a_killed_gmsh_is_one_error_and_the_next_mesh_is_right():
 
     def mesh():
         try:
-            gmsh_fence.in_gmsh("cvxdual.geometry.outline_mesh:gmsh_mesh", *rest_request(scene, SLOW_LEVEL))
+            gmsh_fence.in_gmsh(FENCED, *rest_request(scene, SLOW_LEVEL))
         except cd.CvxdualError as e:
             found.append(e)
 
@@ -106,27 +107,26 @@ def test_time_limit_ends_gmsh_within_its_margin():
     assert gmsh_fence.pid() is None
 
 
-def test_two_threads_mesh_side_by_side():
-    """Two threads meshing 20 times each (no cache: every call reaches gmsh): each gets the mesh a
-    single caller gets, bit for bit."""
-    a, b = cd.load_scene("block-with-hole"), cd.load_scene("rounded-punch")
-    want = {k: gmsh_fence.in_gmsh("cvxdual.geometry.outline_mesh:gmsh_mesh", *rest_request(s, 0))
-            for k, s in (("a", a), ("b", b))}
+def test_two_threads_load_and_mesh_side_by_side():
+    """Two threads loading a scene (one from a .geo file) and meshing it 20 times each (no cache:
+    every call reaches gmsh): each gets the mesh a single caller gets, bit for bit."""
+    sources = {"a": str(ROOT / "examples" / "block-with-hole-geo.toml"), "b": "rounded-punch"}
+    want = {k: gmsh_fence.in_gmsh(FENCED, *rest_request(cd.load_scene(s), 0)) for k, s in sources.items()}
     bad = []
 
-    def work(key, scene):
+    def work(key):
         for _ in range(20):
-            got = gmsh_fence.in_gmsh("cvxdual.geometry.outline_mesh:gmsh_mesh", *rest_request(scene, 0))
+            got = gmsh_fence.in_gmsh(FENCED, *rest_request(cd.load_scene(sources[key]), 0))
             w = want[key]
             if not (np.array_equal(got.points, w.points) and np.array_equal(got.triangles, w.triangles)):
                 bad.append(key)
 
-    ts = [threading.Thread(target=work, args=a_) for a_ in (("a", a), ("b", b))]
+    ts = [threading.Thread(target=work, args=(k,)) for k in sources]
     for t in ts:
         t.start()
     for t in ts:
         t.join(120)
-    assert bad == []
+    assert bad == [] and not any(t.is_alive() for t in ts)
 
 
 def test_ctrl_c_stops_the_command_while_gmsh_meshes():
