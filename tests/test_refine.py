@@ -93,3 +93,72 @@ def test_a_triangle_with_a_whole_edge_is_cut_along_the_shorter_diagonal(a1, diag
     other = (0, 4) if diagonal == (3, 2) else (3, 2)
     assert tuple(sorted(diagonal)) in edges and tuple(sorted(other)) not in edges
     assert _areas(r.points, r.triangles).sum() == pytest.approx(_areas(p, np.array([[0, 1, 2]]))[0], rel=1e-15)
+
+
+def _punch_with_hole(gap, angle):
+    """rounded-punch with a 0.2 square hole in the punch whose outer corner lies ``gap`` inside the free
+    corner arc (radius 20 about (3, 20), from -30 to 0 degrees) at ``angle`` degrees."""
+    import math
+    import tomllib
+    from pathlib import Path
+
+    import cvxdual as cd
+
+    data = tomllib.loads((Path(cd.__file__).parent / "scene" / "data" / "rounded-punch.toml").read_text())
+    t = math.radians(angle)
+    u, v = np.array([math.cos(t), math.sin(t)]), np.array([-math.sin(t), math.cos(t)])
+    c = np.array([3.0, 20.0]) + (20.0 - gap) * u
+    square = [c, c + 0.2 * v, c + 0.2 * v - 0.2 * u, c - 0.2 * u]  # counter-clockwise
+    data["bodies"]["punch"]["holes"] = [{"name": "speck", "points": [[float(x), float(y)] for x, y in square]}]
+    return cd.load_scene(data)
+
+
+def test_a_hole_beyond_gmsh_s_coarser_polygon_is_meshed_at_the_level_itself():
+    """Level 1 gives gmsh every other vertex of the free corner's polygon (15 degree chords, 0.171
+    inside the arc at -7.5 degrees) and refines; a hole 0.1 inside the arc there lies across those
+    chords though level 1's own polygon (a vertex at -7.5 degrees) keeps clear of it. gmsh left that
+    surface empty and refinement asked for edges of a mesh without them ("internal: an edge asked of
+    the refined mesh is not one of its edges", fuzz cases 168, 229, 242, 445): the body is now meshed
+    at level 1 directly, and build_mesh's check of areas and coverage passes."""
+    from cvxdual.geometry.mesh import build_mesh
+
+    mesh = build_mesh(_punch_with_hole(0.1, -7.5), 1)
+    punch = next(b for b in mesh.bodies if b.body.name == "punch")
+    speck = punch.rest.parts["speck"]
+    assert speck[0] == speck[-1] and len(speck) >= 5  # the hole's closed chain of nodes
+
+
+def test_a_hole_across_the_level_s_own_polygon_is_refused_in_one_line():
+    """A hole 0.005 inside the corner arc, in the middle of level 1's 7.5 degree chord (0.043 deep):
+    no polygon of level 1 can bound the body. One line names both parts and a fix (fuzz case 226)."""
+    from cvxdual.geometry.mesh import build_mesh
+
+    with pytest.raises(MeshError) as e:
+        build_mesh(_punch_with_hole(0.005, -3.75), 1)
+    msg = str(e.value)
+    assert "internal" not in msg and "\n" not in msg
+    assert "hole 'speck'" in msg and "outline part 'corner'" in msg and "raise the level to" in msg
+
+
+def test_a_mesh_refinement_would_fold_is_made_at_the_level_itself():
+    """block-with-hole with a notch up from its bottom and a small hole by its corner (fuzz seed
+    3939763642): at level 2 a node refinement places on the hole's circle crosses gmsh's coarser
+    triangle ("refining the mesh folds a triangle over", refused before); the body is meshed at
+    level 2's own sizes instead, and build_mesh's check of areas and coverage passes."""
+    import cvxdual as cd
+    from cvxdual.geometry.mesh import build_mesh
+
+    bottom = {"outline": [{"name": "right", "to": [10.0, -20.0]}, {"name": "bottom", "to": [3.36556161353517, -20.0]},
+                          {"name": "notch", "to": [3.36556161353517, -12.032644465586682]},
+                          {"name": "notch_2", "to": [-0.7911676056682238, -12.032644465586682]},
+                          {"name": "notch_3", "to": [-0.7911676056682238, -20.0]},
+                          {"name": "bottom_2", "to": [-10.0, -20.0]}, {"name": "left", "to": [-10.0, 0.0]}],
+              "holes": [{"name": "hole", "center": [7.376314772373342, -17.17548518380147],
+                         "radius": 0.5013147723733423}]}
+    data = cd.scene.scenefile.builtin_data("block-with-hole")
+    data["bodies"]["bottom"].update(bottom)
+    data["bodies"]["bottom"]["boundary"] = {k: v for k, v in data["bodies"]["bottom"]["boundary"].items()
+                                            if v.get("on") in ("right", "left", "bottom_2", "face")}
+    mesh = build_mesh(cd.load_scene(data), 2)
+    block = next(b for b in mesh.bodies if b.body.name == "bottom")
+    assert block.rest.parts["hole"][0] == block.rest.parts["hole"][-1]  # the hole's closed chain

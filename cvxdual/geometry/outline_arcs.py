@@ -1,6 +1,16 @@
 """Curved parts of an outline body's mesh: a free arc's exact polygon and the pieces beyond it
-(section 9 of docs/theory.md), a gmsh arc for a loaded or supported one, and finding mesh nodes
-by their coordinates (how gmsh's nodes are matched to the points cvxdual placed)."""
+(section 9 of docs/theory.md), a gmsh arc for a loaded or supported one, finding mesh nodes by
+their coordinates (how gmsh's nodes are matched to the points cvxdual placed), and whether the
+polygons that stand for the curves still bound one region (:func:`first_clash`).
+
+A valid outline's curves keep clear of each other, but their polygons need not: a free arc's
+chords cut inside it (``r (1 - cos(d / 2))`` deep), a hole's tangent polygon reaches outside its
+circle, a spline's chords cut its bends, and at level ``L >= 1`` gmsh gets every other vertex of
+each (four times as deep). A part closer to such a curve than that (a small hole by a rounded
+corner) crosses the polygon, or lies beyond it: gmsh then leaves a surface empty or fills a hole,
+and the refined mesh misses edges of the curves. :func:`first_clash` finds such a pair before
+gmsh runs: at level ``L``'s polygons the body is refused (:func:`clash_message`), at gmsh's
+coarser ones it is meshed at level ``L`` directly (:mod:`~cvxdual.geometry.outline_mesh`)."""
 
 from __future__ import annotations
 
@@ -8,8 +18,11 @@ import math
 
 import numpy as np
 
+from ..scene.planar import inside, meeting_pairs, point_segment_distance
 from .outline_sizes import arc_edges, arc_size
 from .triangles import doubled_areas, edge_keys
+
+CLASH_SAMPLES = 256  # points per curved segment when measuring how far a polygon strays from its curve
 
 
 def match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -87,3 +100,83 @@ def gmsh_arc(geo, point, s, level, size) -> int:
     b = point(s.end, min(size(s.end), lc))
     c = point(s.center, lc)
     return geo.addCircleArc(a, c, b)
+
+
+def first_clash(rings: list, owners: list) -> tuple | None:
+    """The first two owners whose polylines keep the closed loops ``rings`` from bounding one
+    region, or ``None``: ``rings[0]`` is the outer loop, the rest are holes, each a list of
+    polylines ``(m, 2)`` in loop order, ``owners`` the same lists of labels. Two segments may meet
+    only at a shared end (consecutive ones); every hole must lie inside the outer loop (the
+    label of its nearest outer polyline is given when it does not) and inside no other hole."""
+    polys = [p for r in rings for p in r]
+    label = [o for r in owners for o in r]
+    own = np.concatenate([np.full(len(p) - 1, i) for i, p in enumerate(polys)])
+    segs = np.concatenate([np.stack([p[:-1], p[1:]], 1) for p in polys])
+    tol = 1e-12 * float(np.ptp(segs.reshape(-1, 2), axis=0).max())
+    pairs = meeting_pairs(segs, tol)
+    a, b = segs[pairs[:, 0]], segs[pairs[:, 1]]
+    shared = np.zeros(len(pairs), bool)
+    for i in range(2):
+        for j in range(2):
+            shared |= np.all(a[:, i] == b[:, j], axis=1)
+    bad = pairs[~shared]
+    if len(bad):
+        return label[own[bad[0, 0]]], label[own[bad[0, 1]]]
+    loops = [np.concatenate(r) for r in rings]
+    firsts = np.array([r[0][0] for r in rings[1:]]).reshape(-1, 2)  # one vertex of each hole
+    out = np.flatnonzero(~inside(loops[0], firsts)) if len(firsts) else []
+    if len(out):
+        h = int(out[0]) + 1
+        d = point_segment_distance(firsts[out[0]], segs[own < len(rings[0]), 0], segs[own < len(rings[0]), 1])
+        return owners[h][0], label[own[int(np.argmin(d))]]
+    for i in range(1, len(rings)):
+        within = np.flatnonzero(inside(loops[i], firsts))
+        within = within[within != i - 1]
+        if len(within):
+            return owners[int(within[0]) + 1][0], owners[i][0]
+    return None
+
+
+def clash_message(body, level: int, a, b, polygon, strip: np.ndarray) -> str:
+    """One line refusing ``body`` at ``level``: the polygons standing for parts ``a`` and ``b``
+    (``polygon(name)``: its points) cross, though the parts themselves do not; how far apart to
+    move them, and the level at which their polygons keep clear (their strays from the curves
+    quarter a level), if that is at most four levels up. ``None`` is the strip, whose inner chain
+    ``strip`` stands for itself."""
+    def curve(name):  # the part itself: dense samples of its curves
+        if name is None:
+            return strip
+        return np.concatenate([s.sample(CLASH_SAMPLES) if s.is_arc else np.array([s.start, s.end]) if not s.is_spline
+                               else s.sample(max(4, CLASH_SAMPLES // (len(s.through) + 1)))
+                               for s in body.outline.part(name).segments])
+
+    def what(name):
+        if name is None:
+            return "the strip of columns along the face"
+        return f"{'hole' if name in {h.name for h in body.outline.holes} else 'outline part'} {name!r}"
+
+    def stray(name):  # how far the polygon strays from the part: at its vertices and edge midpoints
+        if name is None:
+            return 0.0
+        p = polygon(name)
+        return float(_distances(np.concatenate([p, 0.5 * (p[:-1] + p[1:])]), curve(name)).max())
+
+    who = f"body {body.name!r}: at level {level} the polygon"
+    if a == b:
+        return f"{who} that stands for {what(a)} crosses itself; raise the level, or smooth the part"
+    ca, cb = curve(a), curve(b)
+    gap = min(float(_distances(ca, cb).min()), float(_distances(cb, ca).min()))
+    dev = stray(a) + stray(b)
+    if not gap < dev:  # pragma: no cover - the polygons keep within their strays of the curves
+        return f"{who}s that stand for {what(a)} and {what(b)} cross; raise the level, or move them apart"
+    up = next((k for k in range(1, 5) if dev / 4**k < 0.5 * gap), None)
+    return (f"{who}s that stand for {what(a)} and {what(b)} cross: the polygons lie up to {dev:.3g} off the curves "
+            f"in all, and the parts come within {gap:.3g} of each other; move them at least {1.2 * dev:.2g} apart"
+            + (f", or raise the level to {level + up}" if up else ""))
+
+
+def _distances(p: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """The distance of each point ``p`` ``(m, 2)`` to the polyline ``line``, about 1e6 pairs at once."""
+    step = max(1, (1 << 20) // max(len(line) - 1, 1))
+    return np.concatenate([point_segment_distance(p[k:k + step, None], line[None, :-1], line[None, 1:]).min(axis=1)
+                           for k in range(0, len(p), step)])

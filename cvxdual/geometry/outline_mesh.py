@@ -45,10 +45,10 @@ from ..errors import MeshError
 from ..scene.planar import inside, segments_meet
 from .gmsh_fence import in_gmsh
 from .gmsh_worker import import_gmsh
-from .outline_arcs import continuation, free_arc, gmsh_arc, match_rows
+from .outline_arcs import clash_message, continuation, first_clash, free_arc, gmsh_arc, match_rows
 from .outline_cut import find_cuts
 from .outline_sizes import STRIP_ASPECT, SizeField, graded_stops, steering, strip_depth
-from .refine import refine
+from .refine import FoldError, refine
 from .triangles import doubled_areas
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
@@ -135,14 +135,15 @@ def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> Res
         gmsh.finalize()
 
 
-def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
+def _mesh(gmsh, body, columns, inner_y, level, halved=True) -> RestMesh:
     geo = gmsh.model.geo
     gmsh.model.add(body.name)
     nc = len(columns)
     face_y = body.face.value(columns)
     chain = np.stack([columns, inner_y], 1)
     # level >= 1: gmsh meshes at the sizes of level - 1 through every other chain node, refined once
-    step, glevel = (2, level - 1) if level >= 1 else (1, level)
+    # (not ``halved``: at level's own sizes through every node, when the polygons of level - 1 clash)
+    step, glevel = (2, level - 1) if level >= 1 and halved else (1, level)
     cols = columns[::step]
     w = strip_depth(cols) / STRIP_ASPECT
     side = strip_depth(columns)  # the strip's sides are kept whole: their ends get their length as size
@@ -252,6 +253,25 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
         cs = [c for s in h.segments for c in curve(h.name, s, True)]  # the body lies outside its holes
         part_curves[h.name] = cs
         holes.append(cs)
+    # the polygons must bound one region, at this level (else refused) and as gmsh gets them (else
+    # meshed at this level directly): a part closer to a curve than its chords are (outline_arcs)
+    label = {c: name for name, cs in part_curves.items() for c in cs if not isinstance(c, tuple)}
+    rings = [loop] + holes
+    owners = [[label.get(c) for c in r] for r in rings]  # None: the strip's chain and sides
+
+    def at_level(c) -> np.ndarray:  # the curve's polyline at this level: with the node refinement puts on it
+        p = shape[c][0]
+        return p if mids.get(c) is None else np.array([p[0], mids[c], p[-1]])
+
+    clash = first_clash([[at_level(c) for c in r] for r in rings], owners)
+    if clash:
+        def polygon(name):
+            return np.concatenate([at_level(c) for r, o in zip(rings, owners, strict=True)
+                                   for c, n in zip(r, o, strict=True) if n == name])
+        raise MeshError(clash_message(body, level, *clash, polygon, chain))
+    if step > 1 and first_clash([[shape[c][0] for c in r] for r in rings], owners):
+        gmsh.model.remove()
+        return _mesh(gmsh, body, columns, inner_y, level, halved=False)
     cuts = find_cuts(chain[::step], body.sign, [shape[c] for c in loop[:n_path]],
                      [[shape[c] for c in cs] for cs in holes], field.at)
 
@@ -305,7 +325,11 @@ def _mesh(gmsh, body, columns, inner_y, level) -> RestMesh:
     if np.any(tris < 0) or not len(tris):
         raise MeshError(f"gmsh gave no usable mesh of body {body.name!r}")  # pragma: no cover - gmsh contract
     if step > 1:
-        xy, tris, curve_nodes = _refined(xy, tris, curve_nodes, mids, arc_of, shape)
+        try:
+            xy, tris, curve_nodes = _refined(xy, tris, curve_nodes, mids, arc_of, shape)
+        except FoldError:  # a fine node crosses gmsh's coarser triangle: mesh at this level's sizes instead
+            gmsh.model.remove()
+            return _mesh(gmsh, body, columns, inner_y, level, halved=False)
     # the mesh's nodes on the chain are the strip's inner nodes (i, 1); at the face ends also (i, 0)
     known = np.concatenate([chain, [[columns[0], face_y[0]], [columns[-1], face_y[-1]]]])
     known_idx = np.concatenate([2 * np.arange(nc) + 1, [0, 2 * nc - 2]])

@@ -19,6 +19,9 @@ from ..errors import MeshError
 from .triangles import doubled_areas, edge_keys
 
 
+class FoldError(MeshError):
+    """Refinement would turn a child triangle against its parent (the caller may mesh the level directly)."""
+
 @dataclass(frozen=True)
 class Refined:
     """The refined mesh: ``points`` (the old nodes first, in their order, then one new node per
@@ -102,7 +105,7 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     # a moved node must not fold a triangle over: every child keeps its parent's orientation
     parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3)
     if np.any(np.sign(doubled_areas(new, children)) != np.sign(doubled_areas(points, tri[parent]))):
-        raise MeshError("refining the mesh folds a triangle over (a node placed on a curved part or on the strip "
+        raise FoldError("refining the mesh folds a triangle over (a node placed on a curved part or on the strip "
                         "crosses it); raise the level, or move the part away from the others")
     return Refined(points=new, triangles=children, n_old=n, edge_keys=keys, edge_mid=mid)
 
