@@ -68,7 +68,11 @@ def check_body_mesh(body, points: np.ndarray, tris: np.ndarray, face_nodes: np.n
     # over it (a circular segment); on a spline, the edge's share of its chord's (_splines)
     curve = np.where(spline, chord_area, e * (0.5 * (d[:, 0] + d[:, 1]) + extra[k]) + _bulge(e, inv_r[k]))
     mesh_area, exact = 0.5 * float(area2.sum()), _area(body)
-    slack = face_slack + float(np.sum(curve + e * tol)) + ROUND * exact  # and the sums' rounding
+    # and the sums' rounding; the face's integral is a difference of its antiderivative's values,
+    # which far from the origin (a body at x = 4e7) are large: their rounding counts too
+    x0, x1 = body.x_range
+    far = float(np.abs(body.face.antiderivative(np.array([x0, x1], float))).sum())
+    slack = face_slack + float(np.sum(curve + e * tol)) + ROUND * exact + 8 * np.finfo(float).eps * far
     if abs(mesh_area - exact) > slack:
         raise MeshError(f"{who}: the mesh's area {mesh_area:.9g} is not the body's {exact:.9g} (off by "
                         f"{mesh_area - exact:.3g}, more than the {slack:.2g} its polygons allow): a region is "
