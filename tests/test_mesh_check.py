@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from helpers import without_progress
 
+import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.errors import MeshError, SceneError
 from cvxdual.geometry import mesh_check
@@ -233,3 +234,16 @@ def test_check_finds_a_wrong_area(kirsch, monkeypatch):
     monkeypatch.setattr(mesh_check, "_area", lambda body: exact + 0.05)
     with pytest.raises(MeshError, match="is not the body's"):
         _check(kirsch)
+
+
+def test_a_level_is_not_refused_for_its_coarser_size_probe():
+    """The size estimate meshes an outline body at a coarser probe level (at most 32 columns); a
+    hole 0.4 under the face meets that level's strip (0.625 deep at level 2) but not level 3's: the
+    probe climbs to the level that meshes, so level 3 solves (it was refused by the probe) and its
+    contact force is the applied load (to rounding: 1e-9 relative)."""
+    d = cd.scene.scenefile.builtin_data("block-with-hole")
+    d["bodies"]["bottom"]["holes"] = [{"name": "hole", "center": [0.3, -0.6], "radius": 0.2}]
+    scene = cd.load_scene(d)
+    with pytest.raises(cd.MeshError, match="strip of columns"):
+        build_mesh(scene, 2)
+    assert cd.solve(scene, level=3, solver="fast").contact["total_force"] == pytest.approx(2000.0, rel=1e-9)

@@ -119,10 +119,16 @@ def _probe_rest(scene: Scene, body: Body, level: int, cols: float, extra) -> flo
     about 4: 3.0-4.1 measured; the estimate is 1.0-1.9 times the count, reports/outlines.md)."""
     probe = level - max(0, math.ceil(math.log2(max(cols, 1.0) / PROBE_COLUMNS)))
     probe = max(probe, 0)
-    c = column_abscissae(scene, probe, extra)
-    c = c[(c >= body.x_range[0]) & (c <= body.x_range[1])]
-    n = len(mesh_rest(body, c, body.face.value(c) + body.sign * strip_depth(c), probe).triangles)
-    return n * 4.0 ** (level - probe)
+    while True:
+        c = column_abscissae(scene, probe, extra)
+        c = c[(c >= body.x_range[0]) & (c <= body.x_range[1])]
+        try:
+            n = len(mesh_rest(body, c, body.face.value(c) + body.sign * strip_depth(c), probe).triangles)
+            return n * 4.0 ** (level - probe)
+        except MeshError:
+            if probe >= level:
+                raise
+            probe += 1  # a coarse level a body cannot be meshed at (a thick strip meets a hole) says nothing of level
 
 
 @dataclass(frozen=True)
