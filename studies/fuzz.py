@@ -88,9 +88,11 @@ def worker(conn, memory: int):
 
 
 class Worker:
-    def __init__(self, memory: int):
+    """A worker process running ``target(conn, memory)`` (default: :func:`worker`), one case at a time."""
+
+    def __init__(self, memory: int, target=None):
         self.conn, child = mp.Pipe()
-        self.proc = mp.get_context("fork").Process(target=worker, args=(child, memory), daemon=True)
+        self.proc = mp.get_context("fork").Process(target=target or worker, args=(child, memory), daemon=True)
         self.proc.start()
         child.close()
         self.case, self.started, self.done = None, 0.0, 0

@@ -25,7 +25,6 @@ import collections
 import csv
 import io
 import json
-import multiprocessing as mp
 import re
 import resource
 import sys
@@ -34,6 +33,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 import numpy as np
+from fuzz import Worker  # studies/fuzz.py: one case at a time in a worker process
 from outline_fuzzing import GEO_SHARE, HOSTILE_SHARE, NOT_FINDINGS, make_case, run_case  # studies/, beside this script
 
 from cvxdual.files import write_text
@@ -56,30 +56,6 @@ def worker(conn, memory: int):
         conn.send({**out, "seconds": time.perf_counter() - t0})
 
 
-class Worker:
-    def __init__(self, memory: int):
-        self.conn, child = mp.Pipe()
-        self.proc = mp.get_context("fork").Process(target=worker, args=(child, memory), daemon=True)
-        self.proc.start()
-        child.close()
-        self.spec, self.started, self.done = None, 0.0, 0
-
-    def send(self, spec):
-        self.spec, self.started = spec, time.perf_counter()
-        self.conn.send(spec)
-
-    def stop(self, kill: bool = False):
-        if not kill:
-            try:
-                self.conn.send(None)
-            except OSError:
-                pass
-            self.proc.join(5)
-        if self.proc.is_alive():
-            self.proc.kill()
-            self.proc.join()
-        self.conn.close()
-
 
 def specs(n: int, seed: int, levels, hostile: float = HOSTILE_SHARE, geo: float = GEO_SHARE) -> list[dict]:
     seeds = np.random.default_rng(seed).integers(2**32, size=n)
@@ -99,18 +75,18 @@ def fuzz(todo: list[dict], n_workers: int = 1, timeout: float = 60.0, memory: in
          max_tasks: int = 100, progress: bool = True) -> list[dict]:
     """Run the cases ``todo`` in ``n_workers`` worker processes: one row per case."""
     todo, rows = list(todo), []
-    workers = [Worker(memory) for _ in range(n_workers)]
+    workers = [Worker(memory, worker) for _ in range(n_workers)]
     next_print = time.perf_counter() + 60
     while True:
         for w in workers:
-            if w.spec is None and todo:
+            if w.case is None and todo:
                 w.send(todo.pop(0))
-        busy = [w for w in workers if w.spec is not None]
+        busy = [w for w in workers if w.case is not None]
         if not busy:
             break
         ready = wait([w.conn for w in busy], timeout=0.5)
         for i, w in enumerate(workers):
-            if w.spec is None:
+            if w.case is None:
                 continue
             res = None
             if w.conn in ready:
@@ -125,18 +101,18 @@ def fuzz(todo: list[dict], n_workers: int = 1, timeout: float = 60.0, memory: in
                 continue
             if "base" not in res:  # a hang, a crash or the generator's failure: the case's fields, drawn here
                 try:
-                    case = case_of(w.spec)
+                    case = case_of(w.case)
                     res.update({k: case[k] for k in FIELDS[2:8]})
                 except Exception as e:
                     res.update(outcome=f"oracle-error:{type(e).__name__}", detail=f"make_case: {e}"[:300])
             rows.append({"traceback": "", "detail": "", "seconds": time.perf_counter() - w.started,
-                         **{k: w.spec[k] for k in ("id", "seed", "levels", "shares")}, **res})
+                         **{k: w.case[k] for k in ("id", "seed", "levels", "shares")}, **res})
             w.done += 1
             if res["outcome"] in ("crash", "hang") or w.done >= max_tasks:
                 w.stop(kill=res["outcome"] in ("crash", "hang"))
-                workers[i] = Worker(memory)
+                workers[i] = Worker(memory, worker)
             else:
-                w.spec = None
+                w.case = None
         if progress and time.perf_counter() > next_print:
             next_print += 60
             c = collections.Counter(r["outcome"].split(":")[0] for r in rows)

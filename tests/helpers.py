@@ -68,3 +68,26 @@ def without_progress(err: str) -> list[str]:
     progress = [any(line.startswith(f"cvxdual: {p}: ") for p in PROGRESS) for line in lines]
     assert progress == sorted(progress, reverse=True), err  # no progress line after another line
     return [line for line, p in zip(lines, progress, strict=True) if not p]
+
+
+# a scene whose lower block is drawn in b.geo beside it (tests of the .geo route)
+GEO_SCENE = """name = "geo"
+[bodies.top]
+position = "upper"
+x = [-10.0, 10.0]
+face = { kind = "flat", y0 = 0.0 }
+material = { E = 70000.0, nu = 0.3 }
+outline = [{ name = "right", to = [10.0, 4.0] }, { name = "top", to = [-10.0, 4.0] },
+           { name = "left", to = [-10.0, 0.0] }]
+[bodies.top.boundary.pressure]
+on = "top"
+kind = "traction"
+traction = { value = [0.0, -100.0] }
+[bodies.bottom]
+position = "lower"
+material = { E = 210000.0, nu = 0.3 }
+geo = "b.geo"
+[bodies.bottom.boundary.support]
+on = "bottom"
+kind = "clamped"
+"""

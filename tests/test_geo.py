@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import without_progress
+from helpers import GEO_SCENE, without_progress
 
 from cvxdual.cli import main
 from cvxdual.errors import SceneError
@@ -31,26 +31,7 @@ Line(1) = {4, 1}; Line(2) = {1, 2}; Line(3) = {2, 3}; Line(4) = {3, 4};
 NAMES = """Physical Curve("face") = {1}; Physical Curve("right") = {2}; Physical Curve("bottom") = {3};
 Physical Curve("left") = {4};
 """
-SCENE = """name = "geo"
-[bodies.top]
-position = "upper"
-x = [-10.0, 10.0]
-face = { kind = "flat", y0 = 0.0 }
-material = { E = 70000.0, nu = 0.3 }
-outline = [{ name = "right", to = [10.0, 4.0] }, { name = "top", to = [-10.0, 4.0] },
-           { name = "left", to = [-10.0, 0.0] }]
-[bodies.top.boundary.pressure]
-on = "top"
-kind = "traction"
-traction = { value = [0.0, -100.0] }
-[bodies.bottom]
-position = "lower"
-material = { E = 210000.0, nu = 0.3 }
-geo = "b.geo"
-[bodies.bottom.boundary.support]
-on = "bottom"
-kind = "clamped"
-"""
+SCENE = GEO_SCENE
 FAST = 1.0  # seconds: a refusal reads a few statements (milliseconds); a loop, a sleep or /dev/zero would not end
 
 

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers import without_progress
+from helpers import GEO_SCENE, without_progress
 
 import cvxdual as cd
 from cvxdual.cli import main
@@ -288,26 +288,6 @@ MALFORMED = [
 
 GEO_BLOCK = """Point(1) = {10, 0, 0}; Point(2) = {10, -20, 0}; Point(3) = {-10, -20, 0}; Point(4) = {-10, 0, 0};
 Line(1) = {4, 1}; Line(2) = {1, 2}; Line(3) = {2, 3}; Line(4) = {3, 4};
-"""
-GEO_SCENE = """name = "geo"
-[bodies.top]
-position = "upper"
-x = [-10.0, 10.0]
-face = { kind = "flat", y0 = 0.0 }
-material = { E = 70000.0, nu = 0.3 }
-outline = [{ name = "right", to = [10.0, 4.0] }, { name = "top", to = [-10.0, 4.0] },
-           { name = "left", to = [-10.0, 0.0] }]
-[bodies.top.boundary.pressure]
-on = "top"
-kind = "traction"
-traction = { value = [0.0, -100.0] }
-[bodies.bottom]
-position = "lower"
-material = { E = 210000.0, nu = 0.3 }
-geo = "b.geo"
-[bodies.bottom.boundary.support]
-on = "bottom"
-kind = "clamped"
 """
 NAMES = 'Physical Curve("face") = {1};\nPhysical Curve("right") = {2};\nPhysical Curve("bottom") = {3};\n'
 GEO_BAD = [
