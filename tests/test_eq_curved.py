@@ -230,6 +230,30 @@ def test_curvature_bounds_hold_on_every_interval():
         assert np.all(c.min(1) >= lo - 1e-12 * np.abs(lo)) and np.all(c.max(1) <= hi + 1e-12 * np.abs(hi))
 
 
+def test_composite_curvature_bounds_take_each_piece_on_its_own_side():
+    """A composite face's curvature jumps at its joints (mesh columns): an interval ending at a
+    joint is bounded by its own piece's values (an arc whose steepest end meets a flat, the
+    rounded punch's flat next to its corners), never by the neighbour's, in either direction
+    (the neighbour's 1/R on the flat made the slack bound dip by b^2 / 8R and v jump by it; the
+    next piece's 0 at an arc's right end under-bounded the arc)."""
+    from cvxdual.scene.piecewise import Composite
+    y4 = 6.0 - np.sqrt(20.0)
+    prof = Composite(nodes=((-4.0, 6.0 - np.sqrt(20.0)), (0.0, 0.0), (4.0, y4), (8.0, y4)),
+                     centers=((0.0, 6.0), (0.0, 6.0), None))
+    rng = np.random.default_rng(3)
+    joints = np.array([-4.0, 0.0, 4.0, 8.0])
+    a = np.concatenate([rng.uniform(-4, 8, 200), joints[:-1], [2.0, 0.0]])
+    b = np.concatenate([np.minimum(a[:200] + rng.uniform(0, 5, 200), 8.0), joints[1:], [4.0, 4.0]])
+    lo, hi = prof.curvature_range(a, b)
+    # the inside of each interval, sampled (the joints themselves belong to neither side)
+    x = a[:, None] + np.linspace(1e-9, 1 - 1e-9, 2001)[None, :] * (b - a)[:, None]
+    c = prof.curvature(x)
+    # rounding of the closed forms only: 1e-12 relative
+    assert np.all(c.min(1) >= lo - 1e-12 * np.abs(lo)) and np.all(c.max(1) <= hi + 1e-12 * np.abs(hi))
+    # and sharp: on [-4, 0], [0, 4] the arc's own extremes; on the flat [4, 8] exactly 0
+    assert np.allclose(hi[200:203], [36 / 20**1.5, 36 / 20**1.5, 0.0]) and np.allclose(lo[200:203], [1 / 6, 1 / 6, 0.0])
+
+
 @pytest.mark.parametrize("scene", CURVED)
 def test_slack_bound_is_below_every_sample(scene):
     """The admissible displacement's slack ``eps - [v]`` is at least its guaranteed bound at every

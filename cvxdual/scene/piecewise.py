@@ -151,13 +151,16 @@ class Composite(Profile):
         xs = self._x
         for j, c in enumerate(self.centers):
             a, b = np.maximum(x0, xs[j]), np.minimum(x1, xs[j + 1])
-            m = a <= b
+            # a piece counts where it overlaps the interval's inside: f'' jumps at the pieces' ends
+            # (mesh columns), so a neighbour touching an end bounds nothing of the inside
+            m = (a < b) | ((a == b) & (x0 == x1))
             if c is None:
                 k = np.zeros(m.sum())
                 lo[m], hi[m] = np.minimum(lo[m], k), np.maximum(hi[m], k)
                 continue
             # |f''| = r^2 / w^3 grows with |x - cx|: extreme at the ends or (for the least) at cx
-            ka, kb = self.curvature(np.clip(a[m], xs[j], xs[j + 1])), self.curvature(np.clip(b[m], xs[j], xs[j + 1]))
+            # piece j's own formula at both ends (self.curvature would take the next piece at its right end)
+            ka, kb = (self._on_piece(j, np.clip(e[m], xs[j], xs[j + 1]), "curvature") for e in (a, b))
             inner = (a[m] <= c[0]) & (b[m] >= c[0])
             r = math.dist(self.nodes[j], c)
             kc = -self._branch(j) / r

@@ -52,7 +52,9 @@ class Profile:
     def curvature_range(self, x0, x1) -> tuple[np.ndarray, np.ndarray]:
         """Bounds ``(lo, hi)`` with ``lo <= f''(x) <= hi`` for every ``x`` in ``[x0, x1]``
         (arrays of intervals): guaranteed, from the closed form of ``f''`` (each kind knows where
-        its curvature is extreme), not from samples. The certified bounds rest on them."""
+        its curvature is extreme), not from samples. The certified bounds rest on them. Where
+        ``f''`` jumps (a piecewise profile's joints, always mesh columns) an interval ending at
+        the jump takes the one-sided value from its own side."""
         raise NotImplementedError
 
     def antiderivative(self, x):
