@@ -12,11 +12,14 @@ __all__ = ["AccuracyError", "CvxdualError", "MeshError", "ModelError", "NoAdmiss
 
 class CvxdualError(Exception):
     """Base class of all errors raised by cvxdual. ``cli`` is the same message with advice for
-    the command line (``--level`` rather than ``level=``), where the two differ."""
+    the command line (``--level`` rather than ``level=``), where the two differ; ``reason`` the
+    problem alone, without advice (a caller that acts on the advice itself, such as the
+    fallback to Clarabel, reports the reason only)."""
 
-    def __init__(self, message: str = "", cli: str | None = None):
+    def __init__(self, message: str = "", cli: str | None = None, reason: str | None = None):
         super().__init__(message)
         self.cli = cli
+        self.reason = reason
 
 
 class SceneError(CvxdualError, ValueError):

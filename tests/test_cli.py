@@ -112,6 +112,7 @@ BAD = [
     (["--solver", "NOSUCH"], "unknown or uninstalled solver"),
     (["--triangulation", "type3"], "triangulation"),
     (["--set", "mesh.colums=3"], "colums"),
+    (["--set", "bodies.nosuch.material.E=5"], "body 'nosuch', which the scene does not have"),
 ]
 
 

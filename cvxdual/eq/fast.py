@@ -455,7 +455,8 @@ class HybridSolver:
         self.n_mu, self.nnz = n_mu, int(S.nnz)
         if not res <= RESIDUAL_TOL:
             why = f"the condensed system is singular or ill-conditioned (relative residual {res:.1e})"
-            raise SolverError(f"{self.what}: {why}; {self.advice[0]}", cli=f"{self.what}: {why}; {self.advice[1]}")
+            raise SolverError(f"{self.what}: {why}; {self.advice[0]}", cli=f"{self.what}: {why}; {self.advice[1]}",
+                              reason=f"{self.what}: {why}")
         return mu, sep, mu_of_y
 
     def consistent(self, mu: np.ndarray, A: np.ndarray, sep: np.ndarray, mu_of_y: np.ndarray) -> np.ndarray:

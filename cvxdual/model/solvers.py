@@ -66,10 +66,15 @@ _ADVICE = {
                               "a finer mesh or another solver",
     "unbounded": "the problem is unbounded: a body can move freely; add supports",
     "unbounded_inaccurate": "the problem looks unbounded: a body can move freely; add supports",
-    "optimal_inaccurate": "the solver stopped before reaching its tolerances (inaccurate); try Clarabel, "
+    "optimal_inaccurate": "the solver stopped before reaching its tolerances (inaccurate); try {other}, "
                            "a coarser mesh, or more iterations",
-    "user_limit": "the solver hit an iteration or time limit; raise max_iter or use Clarabel",
+    "user_limit": "the solver hit an iteration or time limit; raise max_iter or use {other}",
 }
+
+
+def _other(solver: str) -> str:
+    """A solver to suggest after ``solver`` failed: Clarabel, or after Clarabel the fast path."""
+    return "the fast path (solver='fast')" if solver == DEFAULT_SOLVER else "Clarabel"
 
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
@@ -109,8 +114,8 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
         if "nrecognized" in msg or "invalid keyword" in msg:  # OSQP names unknown settings this way
             raise SolverError(f"{what}: solver {solver} rejected the options {sorted(options)} ({msg}); "
                               "check their names and types in the solver's documentation") from None
-        raise SolverError(f"{what}: solver {solver} failed ({msg}); "
-                          "try another solver (e.g. CLARABEL) or a coarser mesh") from None
+        raise SolverError(f"{what}: solver {solver} failed ({msg}); try {_other(solver)} or a coarser mesh",
+                          reason=f"{what}: solver {solver} failed ({msg})") from None
     except (TypeError, ValueError) as e:  # solvers reject unknown or ill-typed options this way
         msg = one_line(e, 200)
         raise SolverError(f"{what}: solver {solver} rejected the options {sorted(options)} ({msg}); "
@@ -126,8 +131,10 @@ def solve_problem(problem, solver: str, what: str, advice: dict | None = None, t
             stop = f"{what}: solver {solver} stopped at the time limit of {time_limit:g} s (status '{status}')"
             raise TimeLimitError(f"{stop}; raise time_limit or try a coarser mesh",
                                  cli=f"{stop}; raise --time-limit or lower --level")
-        text = (advice or {}).get(status) or _ADVICE.get(status, "try another solver")
-        raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}")
+        # the caller's advice as given (it may quote the user's own text); ours names another solver
+        text = (advice or {}).get(status) or _ADVICE.get(status, "try {other}").format(other=_other(solver))
+        raise SolverError(f"{what}: solver {solver} returned status '{status}': {text}",
+                          reason=f"{what}: solver {solver} returned status '{status}'")
     stats = problem.solver_stats
     return SolverStats(solver=solver, status=status, iterations=getattr(stats, "num_iters", None), solve_time=wall,
                        solver_time=getattr(stats, "solve_time", None), setup_time=getattr(stats, "setup_time", None),

@@ -271,6 +271,7 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
         _check_depth(o, "an override")
         if isinstance(o, dict) and "base" in o:
             raise SceneError("an override cannot change 'base'; start from the other scene instead")
+        _check_bodies_named(o, data)
         data = merge(data, _resolve_geo(copy.deepcopy(table(o, "an override")), None))
     scene = scene_from_dict(data)
     # The exact field solves the scene of the outermost file with an [exact] table: a file that
@@ -284,6 +285,16 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
                                f"own ({e})"),)
         scene = replace(scene, exact=replace(scene.exact, declared_for=declared))
     return scene
+
+
+def _check_bodies_named(override, data: dict) -> None:
+    """An override changes bodies the scene has: merging cannot remove one, so a new name is
+    always a typo, refused before it surfaces as a half-made third body ("missing key 'nu'")."""
+    new = isinstance(override, dict) and isinstance(override.get("bodies"), dict) and isinstance(data.get("bodies"), dict)
+    unknown = sorted(set(override["bodies"]) - set(data["bodies"])) if new else []
+    if unknown:
+        raise SceneError(f"an override names body {short(unknown[0], 40)}, which the scene does not have; its bodies "
+                         f"are {', '.join(map(repr, data['bodies']))}")
 
 
 def _resolve_geo(data: dict, holder: Path | None) -> dict:
