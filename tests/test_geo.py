@@ -22,6 +22,7 @@ from cvxdual.errors import SceneError
 from cvxdual.scene import load_scene
 from cvxdual.scene.geo import MAX_BYTES, U, read_geo
 from cvxdual.scene.geo_lang import MAX_STATEMENTS, parse_geo
+from cvxdual.scene.profiles import LowerCircle, UpperCircle
 
 ROOT = Path(__file__).resolve().parents[1]
 BLOCK = """// the lower block of the block-with-hole scene, without its hole
@@ -92,7 +93,7 @@ def test_forbidden_statements_are_refused_unrun(tmp_path, monkeypatch, capsys, s
     line = refused(tmp_path, monkeypatch, capsys, BLOCK + statement.format(marker=marker) + "\n" + NAMES,
                    f"bodies.bottom.geo: line 4: {name!r} is not allowed in a .geo outline;")
     advice = line.split("is not allowed in a .geo outline; ")[1]  # what a .geo outline (or a list) may hold
-    assert any(w in advice for w in ("Physical Curve", "expressions take", "list every tag")), advice
+    assert any(w in advice for w in ("Physical Curve", "expressions take", "list every tag", "[mesh]")), advice
     assert not marker.exists() and not Path(f"{marker}.geo").exists()
 
 
@@ -376,17 +377,22 @@ def test_geo_splines_are_the_outline_s_splines(tmp_path):
 
 
 def test_arc_faces(tmp_path):
-    """A circle face, symmetric or not (its ends at any heights on the branch facing the other
-    body), with the file's own centre; the other branch is refused."""
+    """A circle face, symmetric or not (its ends at any heights on one branch), with the file's own
+    centre; either branch for either body, as a scene file's circle face (a groove is a lower body
+    under its lower branch); an arc across its centre's height is not a graph and is refused."""
     geo = tmp_path / "a.geo"
     geo.write_text(ARC_FACE)
     face, x, _ = read_geo(geo, "upper", "b")
-    assert (face.R, face.xc, face.yc, x) == (10.0, 0.0, 0.0, (-8.0, 8.0))
+    assert (type(face), face.R, face.xc, face.yc, x) == (LowerCircle, 10.0, 0.0, 0.0, (-8.0, 8.0))
     geo.write_text(ARC_FACE.replace("{8, -6, 0}", "{6, -8, 0}"))
     face, x, _ = read_geo(geo, "upper", "b")
     assert (face.R, face.xc, face.yc, x) == (10.0, 0.0, 0.0, (-8.0, 6.0))
-    with pytest.raises(SceneError, match="not a graph y = f\\(x\\) on the lower body's side"):
-        read_geo(geo, "lower", "b")
+    assert read_geo(geo, "lower", "b")[0] == face  # the groove's branch: the body decides nothing here
+    geo.write_text(ARC_FACE.replace("{-8, -6, 0}", "{-8, 6, 0}").replace("{8, -6, 0}", "{8, 6, 0}"))
+    assert type(read_geo(geo, "lower", "b")[0]) is UpperCircle
+    geo.write_text(ARC_FACE.replace("{-8, -6, 0}", "{-8, 6, 0}").replace("{8, -6, 0}", "{6, -8, 0}"))  # via (-10, 0)
+    with pytest.raises(SceneError, match="crosses the height of its centre, so it is not a graph"):
+        read_geo(geo, "upper", "b")
 
 
 def test_splines_run_as_drawn(tmp_path):

@@ -293,11 +293,9 @@ NAMES = 'Physical Curve("face") = {1};\nPhysical Curve("right") = {2};\nPhysical
 GEO_BAD = [
     ("geo without face", GEO_BLOCK + 'Physical Curve("top") = {1};\nPhysical Curve("bottom") = {3};', "named 'face'"),
     ("geo unnamed curve", GEO_BLOCK + NAMES + "Physical Curve(7) = {4};", "has no name"),
-    ("geo slanted face", GEO_BLOCK.replace("Point(4) = {-10, 0, 0}", "Point(4) = {-10, 1, 0}")
-     + NAMES + 'Physical Curve("left") = {4};', "not horizontal"),
-    ("geo face of two curves", GEO_BLOCK.replace("Line(1) = {4, 1};", "Point(9) = {0, 0, 0};\nLine(1) = {4, 9};\n"
-                                                 "Line(5) = {9, 1};")
-     + NAMES.replace("{1}", "{1, 5}") + 'Physical Curve("left") = {4};', "the face is 2 curves"),
+    ("geo face curves apart", GEO_BLOCK.replace("Line(1) = {4, 1};", "Point(9) = {0, 0, 0};\nPoint(8) = {1, 0, 0};\n"
+                                                "Line(1) = {4, 9};\nLine(5) = {8, 1};")
+     + NAMES.replace("{1}", "{1, 5}") + 'Physical Curve("left") = {4};', "do not run end to end"),
     ("geo open", GEO_BLOCK + NAMES, "curve 4 is in no physical curve"),
     ("geo syntax", "Point(1) = {10, 0", "cannot read"),
 ]

@@ -63,7 +63,8 @@ class ActiveSetSolver(Protocol):
 
 def _stuck(solver: ActiveSetSolver, why: str) -> SolverError:
     api, cli = solver.advice
-    return SolverError(f"{solver.what}: {why}; {api}", cli=f"{solver.what}: {why}; {cli}", reason=f"{solver.what}: {why}")
+    reason = f"{solver.what}: {why}"
+    return SolverError(f"{reason}; {api}", cli=f"{reason}; {cli}", reason=reason)
 
 
 def iterate(solver: ActiveSetSolver, A: np.ndarray) -> tuple[np.ndarray, object]:

@@ -162,6 +162,13 @@ def clash_message(body, level: int, a, b, polygon, strip: np.ndarray) -> str:
         return float(_distances(np.concatenate([p, 0.5 * (p[:-1] + p[1:])]), curve(name)).max())
 
     who = f"body {body.name!r}: at level {level} the polygon"
+    along = _along_strip_side(body, b if a is None else a, polygon, strip) if None in (a, b) and a != b else None
+    if along:  # no level helps: the overlap is along a straight line, whatever the polygon's edges
+        name, side, end, depth = along
+        return (f"body {body.name!r}: outline part {name!r} leaves the face's {side} end ({end[0]:.6g}, {end[1]:.6g}) "
+                "along the side of the strip of columns (it runs vertically there), so their polygons overlap at "
+                f"every level; start it with a vertical line longer than the strip is deep ({depth:.3g} at level "
+                f"{level}), or let it leave the face at an angle")
     if a == b:
         return f"{who} that stands for {what(a)} crosses itself; raise the level, or smooth the part"
     ca, cb = curve(a), curve(b)
@@ -173,6 +180,23 @@ def clash_message(body, level: int, a, b, polygon, strip: np.ndarray) -> str:
     return (f"{who}s that stand for {what(a)} and {what(b)} cross: the polygons lie up to {dev:.3g} off the curves "
             f"in all, and the parts come within {gap:.3g} of each other; move them at least {1.2 * dev:.2g} apart"
             + (f", or raise the level to {level + up}" if up else ""))
+
+
+def _along_strip_side(body, name, polygon, strip: np.ndarray):
+    """``(name, side, face end, strip depth)`` if the polygon of part ``name`` leaves a face end
+    straight along the strip's vertical side, into the body (a free concave arc whose tangent is
+    vertical there: its tangent polygon's first edge lies on the side), else ``None``."""
+    if name is None or name in {h.name for h in body.outline.holes}:
+        return None
+    p = polygon(name)
+    tol = 1e-12 * float(np.ptp(strip, axis=0).max())
+    for side, k, inner, (e, nxt) in (("right", -1, strip[-1], (p[0], p[1])), ("left", 0, strip[0], (p[-1], p[-2]))):
+        x = body.x_range[1 if k else 0]
+        end = np.array([x, float(body.face.value(x))])
+        if (np.hypot(*(e - end)) <= tol and abs(nxt[0] - x) <= tol
+                and body.sign * (nxt[1] - end[1]) > tol):  # from the face end, down (up) along x = x_end
+            return name, side, end, abs(float(inner[1] - end[1]))
+    return None
 
 
 def _distances(p: np.ndarray, line: np.ndarray) -> np.ndarray:

@@ -1,12 +1,13 @@
 """Body outlines from ``.geo`` files (docs/scenes.md#outlines-from-gmsh-geo-files).
 
 The file draws the body's whole boundary with lines, circle arcs and splines; its *physical
-curves* name the parts, one of them ``face``: a horizontal line (a flat face) or one circular arc
-(a circle face, the lower branch under an upper body, the upper one over a lower body). Every
-other closed loop is a hole. :mod:`cvxdual.scene.geo_lang` reads the file (the part of gmsh's
-language an outline needs, executing nothing; gmsh is not involved) and this module turns its
-curves into the same :class:`~cvxdual.scene.outline.Outline` a scene file's ``outline`` gives,
-splines evaluated with gmsh's own formulas, so both describe, and mesh, the same body.
+curves* name the parts, one of them ``face``: a horizontal line (a flat face), one circular arc
+(a circle face, either branch for either body, as in a scene file) or several lines and arcs end
+to end (a composite face: a flat with rounded corners). Every other closed loop is a hole.
+:mod:`cvxdual.scene.geo_lang` reads the file (the part of gmsh's language an outline needs,
+executing nothing; gmsh is not involved) and this module turns its curves into the same
+:class:`~cvxdual.scene.outline.Outline` a scene file's ``outline`` gives, splines evaluated with
+gmsh's own formulas, so both describe, and mesh, the same body.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from ..errors import SceneError
 from ..validate import short
 from .geo_lang import GeoFile, parse_geo
 from .outline import MAX_PARTS, Outline, Part, Segment
+from .piecewise import Composite
 from .planar import signed_area
 from .profiles import Flat, LowerCircle, UpperCircle
 
@@ -32,10 +34,13 @@ U = np.linspace(0.0, 1.0, GEO_SPLINE_POINTS + 2)[1:-1]  # their parameters (gmsh
 
 
 def read_geo(path: str | Path, position: str, where: str):
-    """``(face, x_range, outline)`` of the body drawn in ``path``."""
+    """``(face, x_range, outline)`` of the body drawn in ``path``. ``position`` (the body's) does not
+    change the face: any face that is a graph ``y = f(x)`` is taken, as a scene file's is, and the
+    outline check (:func:`~cvxdual.scene.outline.check_outline`) places the body on its side."""
+    del position
     geo = parse_geo(_read_text(Path(path), where), where)
     named, tol = _curves(geo, where)
-    return _outline(named, position, where, tol)
+    return _outline(named, where, tol)
 
 
 def _read_text(path: Path, where: str) -> str:
@@ -245,33 +250,38 @@ def _center(a, m, b) -> tuple[float, float]:
             float((sa * (b[0] - m[0]) + sm * (a[0] - b[0]) + sb * (m[0] - a[0])) / d))
 
 
-def _outline(named: dict[str, list[Segment]], position: str, where: str, tol: float):
+def _outline(named: dict[str, list[Segment]], where: str, tol: float):
     face = named.pop("face")
-    if len(face) != 1:
-        raise SceneError(f"{where}.geo: the face is {len(face)} curves; draw it as one line or one arc")
     if not named:
         raise SceneError(f"{where}.geo: the face is the only named curve; name the rest of the boundary too")
-    f = face[0]
-    if f.is_spline:
-        raise SceneError(f"{where}.geo: the face is a spline; the face must be a line or a circle arc (a flat or a "
-                         "circle face)")
-    (xa, ya), (xb, yb) = f.start, f.end
-    x0, x1 = sorted((float(xa), float(xb)))
-    left, right = ((xa, ya), (xb, yb)) if xa < xb else ((xb, yb), (xa, ya))
-    if f.is_arc:
+    if any(f.is_spline for f in face):
+        raise SceneError(f"{where}.geo: the face is or holds a spline; the face must be a line or a circle arc, or "
+                         "lines and arcs end to end (a flat, circle or composite face)")
+    pieces = _face_chain(face, where, tol)
+    (xa, ya), (xb, yb) = left, right = pieces[0].start, pieces[-1].end
+    x0, x1 = float(xa), float(xb)
+    f = face[0]  # as drawn: the radius from its first end, as before faces of several curves
+    if len(pieces) == 1 and f.is_arc:
         cx, cy = f.center
-        r = math.dist(f.start, f.center)
-        profile = (LowerCircle if position == "upper" else UpperCircle)(R=r, xc=cx, yc=cy)
-        # an arc of less than half a turn with both ends on or below its centre (above, for a lower
-        # body) lies on the lower (upper) half circle: a graph on the side facing the other body
-        off = (max(ya, yb) - cy) if position == "upper" else (cy - min(ya, yb))
-        if off > tol:
-            raise SceneError(f"{where}.geo: the face arc is not a graph y = f(x) on the {position} body's side; "
-                             "draw the branch facing the other body")
-    else:
-        if abs(ya - yb) > tol:
-            raise SceneError(f"{where}.geo: the face line is not horizontal; a straight face must be flat (y = const)")
-        profile = Flat(y0=ya)
+        # an arc of less than half a turn with both ends on or below its centre lies on the lower half
+        # circle, on or above on the upper one: a graph y = f(x) either way, as a scene file's circle
+        # face of either branch under either body (a cylinder's face, a groove's, a bump's)
+        if max(ya, yb) - cy <= tol:
+            profile = LowerCircle(R=math.dist(f.start, f.center), xc=cx, yc=cy)
+        elif cy - min(ya, yb) <= tol:
+            profile = UpperCircle(R=math.dist(f.start, f.center), xc=cx, yc=cy)
+        else:
+            raise SceneError(f"{where}.geo: the face arc crosses the height of its centre, so it is not a graph "
+                             "y = f(x) (it turns back at its leftmost or rightmost point); draw the face on one "
+                             "side of the centre's height")
+    elif len(pieces) == 1 and abs(ya - yb) <= tol:
+        profile = Flat(y0=f.start[1])
+    else:  # lines and arcs end to end, or one slanted line: a composite face, as a scene file's
+        try:
+            profile = Composite(tuple([pieces[0].start, *(p.end for p in pieces)]),
+                                tuple(p.center for p in pieces))
+        except SceneError as e:
+            raise SceneError(f"{where}.geo: the face: {str(e).removeprefix('composite profile: ')}") from None
     # the other segments, chained into loops; the one through the face's ends is the path
     segs = [(name, s) for name, ss in named.items() for s in ss]
     path = _chain(segs, right, left, tol, where)
@@ -298,6 +308,22 @@ def _outline(named: dict[str, list[Segment]], position: str, where: str, tol: fl
         raise SceneError(f"{where}.geo: part {dup[0]!r} has several curves on the boundary; give each curve its own "
                          "physical name (a named part is one line or one arc)")
     return profile, (x0, x1), Outline(tuple(parts), tuple(holes))
+
+
+def _face_chain(face: list[Segment], where: str, tol: float) -> list[Segment]:
+    """The face's curves end to end from its left end to its right end, each running left to right."""
+    ends = np.array([p for s in face for p in (s.start, s.end)])
+    shared = (np.hypot(*(ends[:, None] - ends[None]).transpose(2, 0, 1)) <= tol).sum(axis=1)
+    free = np.flatnonzero(shared == 1)  # the face's two ends: each the end of one curve only
+    if len(free) != 2 or np.any(shared > 2):
+        raise SceneError(f"{where}.geo: the face's {len(face)} curves do not run end to end in one chain; draw the "
+                         "face as lines and arcs, each starting where the last ends")
+    a, b = sorted((tuple(ends[i]) for i in free), key=lambda p: p[0])
+    chain = [s for _, _, s in _chain([("face", s) for s in face], a, b, tol, where)]
+    if len(chain) != len(face):
+        raise SceneError(f"{where}.geo: the face's curves do not all lie on one chain from its left end to its "
+                         "right end; draw the face as one chain of lines and arcs")
+    return chain
 
 
 def _chain(segs, start, end, tol, where, first=None) -> list[tuple[int, str, Segment]]:

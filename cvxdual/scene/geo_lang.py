@@ -34,13 +34,19 @@ FUNCTIONS = {
     "Floor": (1, lambda x: float(math.floor(x))), "Ceil": (1, lambda x: float(math.ceil(x))),
     "Round": (1, lambda x: float(math.floor(x + 0.5))), "Hypot": (2, lambda a, b: math.sqrt(a * a + b * b)),
     "Min": (2, min), "Max": (2, max)}
+# statements that set element sizes or steer gmsh's mesher: cvxdual sizes the mesh itself (one family of
+# meshes that halves a level, so that --level means the same on every body), so they are refused with
+# the [mesh] keys that do it instead; the size after a Point's z is accepted and not read (docs/scenes.md)
+MESHING = {"Mesh", "Characteristic", "MeshSize", "Field", "Background", "Transfinite", "Recombine"}
+SIZES = ("cvxdual sizes the mesh itself, halving it a level: set the sizes with [mesh] columns, focus and grading, "
+         "and the level (docs/scenes.md)")
 EXPRESSIONS = ("expressions take numbers, variables, Pi, newp, newl, + - * / % ^, parentheses and "
                + ", ".join(FUNCTIONS) + " (docs/scenes.md)")
 # statement words (and commands a variable must not be named after, so that refusals name them)
 KEYWORDS = {"Point", "Line", "Circle", "Spline", "BSpline", "Bezier", "Curve", "Loop", "Plane", "Surface", "Physical",
             "Pi", "newp", "newl", "newc", "System", "SystemCall", "NonBlockingSystemCall", "OnelabRun", "Printf",
             "Save", "CreateDir", "Include", "Merge", "GetEnv", "For", "Sleep", "Exit", "Macro", "Call", "If",
-            "SetFactory", "Extrude", "Delete"} | set(FUNCTIONS)
+            "SetFactory", "Extrude", "Delete"} | MESHING | set(FUNCTIONS)
 VALUES = {"Pi", "newp", "newl", "newc"} | set(FUNCTIONS)  # names with a value of their own
 OPERATORS = set("+-*/%^(){},=")
 
@@ -141,13 +147,15 @@ class _Reader:
             return "physical"
         if w0 is None:
             self.fail(line, f"cannot read a statement that starts with {toks[0][1]!r}; {ALLOWED}")
+        sizes = w0 in MESHING
         if ops[1] == "." and words[2]:  # an option, e.g. Mesh.Algorithm
             w0 = f"{w0}.{words[2]}"
-        elif w1 and w0 in ("Physical", "Plane", "Curve", "Line", "Surface", "Transfinite", "Recombine"):
+        elif w1 and w0 in ("Physical", "Plane", "Curve", "Line", "Surface", "Transfinite", "Recombine",
+                           "Characteristic", "Background"):
             w0 = f"{w0} {w1}"
         elif ops[1] not in (None, "(") and (w0 not in KEYWORDS or w0 in ("Point", *CURVES)):  # x[], x +=, Point{
             w0 = f"{w0}{ops[1]}" + ("=" if ops[2] == "=" else "")
-        self.refuse(line, w0)
+        self.refuse(line, w0, SIZES if sizes else ALLOWED)
         return ""
 
     def _statement(self, head: str, toks, src: str) -> None:

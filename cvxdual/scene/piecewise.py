@@ -86,8 +86,9 @@ class Composite(Profile):
                                  f"({r0:g} and {r1:g}); move the centre")
             s0, s1 = np.sign(y0 - c[1]), np.sign(y1 - c[1])
             if s0 * s1 < 0 or (s0 == 0 and s1 == 0):
-                raise SceneError(f"composite profile: arc {k} crosses the height of its centre: it is not a graph "
-                                 "y = f(x); split it there or change the face")
+                raise SceneError(f"composite profile: arc {k} crosses the height of its centre, where it turns back "
+                                 "in x: not a graph y = f(x); end the face's arc before that height (the rest "
+                                 "of the circle can be an outline part)")
 
     @property
     def _x(self) -> np.ndarray:

@@ -70,12 +70,20 @@ def _replaces(base: dict, over: dict) -> bool:
     return bool(set(over) & mat) and ("hooke" in over) != ("hooke" in base)
 
 
+# a body's geometry: a ``geo`` file gives all of it, so a ``geo`` over a body drops these from the base
+GEO_REPLACES = ("x", "far", "face", "outline", "holes")
+
+
 def merge(base: dict, over: dict) -> dict:
     """Deep merge: tables merge key by key (unless :func:`_replaces`), everything else is replaced.
-    A boundary part whose kind changes keeps only its place (``on``, ``interval``) from the base."""
+    A boundary part whose kind changes keeps only its place (``on``, ``interval``) from the base; a
+    body given by ``geo`` keeps none of the base's geometry (:data:`GEO_REPLACES`), only the rest
+    (material, boundary, ...)."""
     out = copy.deepcopy(base)
     for k, v in over.items():
         b = out.get(k)
+        if isinstance(v, dict) and isinstance(b, dict) and isinstance(v.get("geo"), str):  # a body's geo file
+            b = {key: val for key, val in b.items() if key not in GEO_REPLACES}
         if isinstance(v, dict) and isinstance(b, dict) and "on" in b and v.get("kind", b.get("kind")) != b.get("kind"):
             out[k] = {**{key: b[key] for key in ("on", "interval") if key in b}, **copy.deepcopy(v)}
         elif isinstance(v, dict) and isinstance(b, dict) and not _replaces(b, v):
@@ -290,8 +298,8 @@ def load_scene(source: str | Path | dict | None = None, overrides: list[dict] | 
 def _check_bodies_named(override, data: dict) -> None:
     """An override changes bodies the scene has: merging cannot remove one, so a new name is
     always a typo, refused before it surfaces as a half-made third body ("missing key 'nu'")."""
-    new = isinstance(override, dict) and isinstance(override.get("bodies"), dict) and isinstance(data.get("bodies"), dict)
-    unknown = sorted(set(override["bodies"]) - set(data["bodies"])) if new else []
+    bodies, known = (override.get("bodies") if isinstance(override, dict) else None), data.get("bodies")
+    unknown = sorted(set(bodies) - set(known)) if isinstance(bodies, dict) and isinstance(known, dict) else []
     if unknown:
         raise SceneError(f"an override names body {short(unknown[0], 40)}, which the scene does not have; its bodies "
                          f"are {', '.join(map(repr, data['bodies']))}")
