@@ -6,7 +6,7 @@ curved pieces, as ``C e(v)`` of a displacement of ``V_h``: :meth:`StressField.ki
 equilibrium field (``eq``: linear on every sub-triangle of the straight pieces, the column stress
 ``(0, g(x), 0)`` on the curved ones). :meth:`StressField.at` evaluates it at points; :meth:`StressField.rule`
 gives a quadrature of it; :func:`field_distance` integrates the difference of two fields over
-the first one's cells, every point located in the second's.
+the common part of the first one's cells and the second's pieces, every point located in the second's.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CvxdualError
-from ..geometry.locate import locate
+from ..geometry.locate import common_part, locate
 from ..geometry.quadrature import triangle_rule
 from ..voigt import VOIGT_WEIGHT
 from .element import bary_gradients
@@ -65,6 +65,10 @@ class StressField:
         if np.any(loc < 0):
             raise CvxdualError(f"{int(np.sum(loc < 0))} points lie outside the pieces of the field: the fields are "
                                "not of the same scene")
+        return self.in_pieces(pts, loc)
+
+    def in_pieces(self, pts: np.ndarray, loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`at` for points whose pieces ``loc`` are known (:func:`~cvxdual.geometry.locate.locate`)."""
         if self.space is None:
             out = self.stress[loc]
             curved = np.flatnonzero(self.pieces.kind[loc] > 0) if self.slab is not None else []
@@ -187,23 +191,29 @@ def column_at(space, g: np.ndarray, piece: np.ndarray | None, pts: np.ndarray,
 
 
 CHUNK_POINTS = 2_000_000  # quadrature points per pass of field_distance: ~1 GB of temporaries
+OUTSIDE = np.iinfo(np.int64).min  # the cell of a point outside every piece (cells are pieces, or -1 - slab)
 
 
 def field_distance(a: StressField, b: StressField, n: int = 3, n_fine: int | None = 8) -> dict:
-    """``||sigma_a - sigma_b||`` (L2 and energy) integrated over ``a``'s cells (``n*n`` points each),
-    every point evaluated in ``b``; relative measures are against ``a`` (integrate over the finer
-    field). A cell of ``a`` whose points fall in several cells of ``b`` (the meshes are not nested:
-    the integrand jumps inside it) is integrated again with ``n_fine*n_fine`` points. The cells
-    are taken in chunks of about :data:`CHUNK_POINTS` points (a level-6 reference has millions)."""
+    """``||sigma_a - sigma_b||`` (L2 and energy) integrated over the common part of ``a``'s cells
+    (``n*n`` points each) and ``b``'s pieces, every point evaluated in ``b``; relative measures are
+    against ``a`` (integrate over the finer field). A cell of ``a`` whose points fall in several
+    cells of ``b``, or partly outside ``b`` (the meshes are not nested: the integrand jumps inside
+    it), is integrated again with ``n_fine*n_fine`` points. Points outside ``b`` (the polygons
+    standing for an outline body's curves differ between levels) are dropped: ``dropped_area``
+    and ``dropped_share`` say what the integral leaves out of either mesh, and more than those
+    polygons explain is refused (:func:`~cvxdual.geometry.locate.common_part`). The cells are
+    taken in chunks of about :data:`CHUNK_POINTS` points (a level-6 reference has millions)."""
     tol = 1e-10 * a.scene.length_scale  # Gauss points are interior; rounding where the faces coincide
     A_body = np.stack([bd.material.compliance for bd in a.scene.bodies])
     sums = np.zeros(4)  # |d|^2, |a|^2 in L2; d:A d, a:A a
+    dropped = 0.0
     cells = a.cells()
     per = max(1, CHUNK_POINTS // max(n, n_fine or n) ** 2)
     for lo in range(0, len(cells), per):  # chunks of cells, each pass vectorised
         chunk = cells[lo:lo + per]
         pts, w, body, va, cell = a.rule(n, chunk)
-        vb, cb = b.at(pts, body, tol)
+        vb, cb = _values_in(b, pts, body, tol)
         if n_fine is not None:
             ids, first, inv = np.unique(cell, return_index=True, return_inverse=True)
             straddles = np.zeros(len(ids), bool)
@@ -212,9 +222,13 @@ def field_distance(a: StressField, b: StressField, n: int = 3, n_fine: int | Non
             if len(bad):
                 keep = ~np.isin(cell, bad)
                 fp, fw, fb, fv, _ = a.rule(n_fine, bad)
-                fvb, _ = b.at(fp, fb, tol)
-                w, body, va, vb = (np.concatenate([x[keep], y]) for x, y in
-                                   ((w, fw), (body, fb), (va, fv), (vb, fvb)))
+                fvb, fcb = _values_in(b, fp, fb, tol)
+                w, body, va, vb, cb = (np.concatenate([x[keep], y]) for x, y in
+                                       ((w, fw), (body, fb), (va, fv), (vb, fvb), (cb, fcb)))
+        out = cb == OUTSIDE
+        if out.any():
+            dropped += float(w[out].sum())
+            w, body, va, vb = w[~out], body[~out], va[~out], vb[~out]
         d = va - vb
         A = A_body[body]
         sums += [np.sum(w * np.einsum("mi,mi,i->m", d, d, VOIGT_WEIGHT)),
@@ -222,4 +236,17 @@ def field_distance(a: StressField, b: StressField, n: int = 3, n_fine: int | Non
                  np.sum(w * np.einsum("mi,mij,mj->m", d, A, d)), np.sum(w * np.einsum("mi,mij,mj->m", va, A, va))]
     l2, ref, en, ref_en = np.sqrt(sums)
     return {"l2": float(l2), "l2_rel": float(l2 / ref) if ref > 0 else float("nan"), "energy": float(en),
-            "energy_rel": float(en / ref_en) if ref_en > 0 else float("nan")}
+            "energy_rel": float(en / ref_en) if ref_en > 0 else float("nan"),
+            **common_part(a.mesh, b.mesh, dropped, float(a.pieces.area.sum()), float(b.pieces.area.sum()))}
+
+
+def _values_in(b: StressField, pts: np.ndarray, body: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``b``'s values and cells at points (:meth:`StressField.at`); outside its pieces NaN and :data:`OUTSIDE`."""
+    loc = locate(b.mesh, b.pieces, pts, body, tol)
+    inside = loc >= 0
+    if inside.all():
+        return b.in_pieces(pts, loc)
+    vals, cell = np.full((len(pts), 3), np.nan), np.full(len(pts), OUTSIDE)
+    if inside.any():
+        vals[inside], cell[inside] = b.in_pieces(pts[inside], loc[inside])
+    return vals, cell

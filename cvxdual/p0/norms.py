@@ -63,26 +63,36 @@ def l2_norm(system: System, t: np.ndarray) -> float:
 
 def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
     """``||lam_a - lam_b||`` (L2 and energy) between two solutions of the same scene on different
-    meshes, integrated over ``a``'s pieces (``n*n`` points each), every point located in
-    ``b``'s pieces; relative measures are against ``a``. Integrate over the finer mesh: both
-    fields are then constant on most of its pieces and the rule is nearly exact.
+    meshes, integrated over the common part of ``a``'s pieces (``n*n`` points each) and ``b``'s,
+    every point located in ``b``'s pieces; relative measures are against ``a``. Integrate over
+    the finer mesh: both fields are then constant on most of its pieces and the rule is nearly exact.
 
     Where the meshes are not nested (curved faces move nodes between levels, type 2 moves the
     contact polygon), a piece of ``a`` can straddle pieces of ``b`` and the integrand jumps
     inside it. With ``n_fine``, every piece of ``a`` whose ``n*n`` points fall in more than one
-    piece of ``b`` is integrated again with ``n_fine*n_fine`` points instead."""
+    piece of ``b`` (or partly outside ``b``) is integrated again with ``n_fine*n_fine`` points.
+
+    The polygons standing for an outline body's curves differ between levels: points of ``a``
+    outside ``b`` are dropped, and what the integral leaves out of either mesh is reported as
+    ``dropped_area`` and ``dropped_share`` (of ``a``'s area); more than those polygons explain
+    (:func:`~cvxdual.geometry.locate.common_part`) is refused: the solutions are of different scenes."""
+    from ..geometry.locate import common_part
     pa = a.pieces
     pts, w, idx = pa.quadrature(n)
     loc = _locate_in(a, b, pts, idx)
     if n_fine is not None:
         some = np.empty(len(pa), dtype=loc.dtype)
-        some[idx] = loc  # one of each piece's hosts; a piece straddles if any point differs
+        some[idx] = loc  # one of each piece's hosts (-1: outside b); a piece straddles if any point differs
         straddle = np.zeros(len(pa), bool)
         straddle[idx[loc != some[idx]]] = True
         keep = ~straddle[idx]
         fp, fw, fi = pa.quadrature(n_fine, only=straddle)
         pts, w, idx = np.concatenate([pts[keep], fp]), np.concatenate([w[keep], fw]), np.concatenate([idx[keep], fi])
         loc = np.concatenate([loc[keep], _locate_in(a, b, fp, fi)])
+    out = loc < 0
+    dropped = float(w[out].sum())
+    if out.any():
+        w, idx, loc = w[~out], idx[~out], loc[~out]
     body = pa.body[idx]
     acc = np.zeros(4)
     for k, bd in enumerate(a.scene.bodies):
@@ -90,17 +100,12 @@ def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
         if len(m):
             ta = a.stress[idx[m]]
             _accumulate(ta - b.stress[loc[m]], ta, w[m], bd.material.compliance, acc)
-    return _result(acc, n)
+    return {**_result(acc, n), **common_part(a.mesh, b.mesh, dropped, float(pa.area.sum()), float(b.pieces.area.sum()))}
 
 
 def _locate_in(a, b, pts: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Pieces of ``b`` holding the points ``pts`` of ``a``'s pieces ``idx``."""
-    from ..errors import CvxdualError
+    """Pieces of ``b`` holding the points ``pts`` of ``a``'s pieces ``idx`` (-1: outside ``b``)."""
     from ..geometry.locate import locate
     # Gauss points are interior; the tolerance only absorbs rounding where a's and b's faces
     # are the same curve evaluated at different points
-    loc = locate(b.mesh, b.pieces, pts, a.pieces.body[idx], 1e-10 * a.scene.length_scale)
-    if np.any(loc < 0):
-        raise CvxdualError(f"{int(np.sum(loc < 0))} quadrature points of one solution lie outside the "
-                           "other's pieces: the solutions are not of the same scene")
-    return loc
+    return locate(b.mesh, b.pieces, pts, a.pieces.body[idx], 1e-10 * a.scene.length_scale)

@@ -10,7 +10,9 @@ The errors follow the convergence study of the paper's (2.4): against an exact f
 Gauss rule of ``rule`` x ``rule`` points per piece (``check_rule`` at the finest level as a
 check); against a reference, integrated over the reference's pieces (``ref_rule`` points, and
 ``ref_fine`` on the pieces that straddle studied pieces), every point located in the studied
-mesh. The reference's own error is estimated from the levels below it: with
+mesh: over the common part of both meshes, where an outline body's curves are polygons that
+differ between levels (``ref_dropped_area``, ``ref_dropped_share``: what that leaves out). The
+reference's own error is estimated from the levels below it: with
 ``d_k = ||lam_k - lam_(k+1)||`` and ``p = log2(d_(R-2) / d_(R-1))``, ``err_R ~ d_(R-1) / (2^p - 1)``.
 """
 
@@ -43,7 +45,8 @@ REQUIRED = tuple(ROW_TYPES)
 IDENTITY = ("study", "case", "group", "scene", "overrides", "units", "triangulation", "stress_space", "level",
             "solver", "reference")  # a row of this case: these columns are its base_row's
 NUMERIC = {"h_min", "h_ratio", "iterations", "duality_gap", "contact_x_min", "contact_x_max", "peak_pressure",
-           "total_force", "peak_mb", "reference_error_est", "edge_error_share", "effectivity", "bound_energy_rel"}
+           "total_force", "peak_mb", "reference_error_est", "edge_error_share", "effectivity", "bound_energy_rel",
+           "ref_dropped_area", "ref_dropped_share"}
 NUMERIC_PREFIXES = ("error_", "res_", "t_", "n_")
 MEASURED = {"error_l2": NUM, "error_l2_rel": NUM, "error_energy_rel": NUM, "reference_error_est": NUM}
 INFO_TYPES = {"level": INT, "triangulation": TEXT, "solver": TEXT, "n_pieces": INT, "d_last": NUM,
@@ -186,6 +189,10 @@ def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool 
         if ensure_cached:
             _recache(cache, key, f)
         return f, False
+    from ..sizing import check_size
+    # the solve checks its size too, but the mesh is built first (to look the field up): a level
+    # past the machine's memory is refused in one line here rather than killing two workers
+    check_size(scene, level, ref.solver == "fast", ref.stress_space)
     mesh, pieces, _ = discretize(scene, ref.triangulation, level)
     if ref.stress_space == "eq":
         from ..eq.fields import StressField
@@ -266,15 +273,17 @@ def reference_info_task(source: str, overrides: tuple, units, ref: Reference, me
     R = ref.level
     f2, _ = reference_field(scene, ref, R - 2, cache, keep=False)
     f1, _ = reference_field(scene, ref, R - 1, cache, keep=False)
-    d2 = distance(f1, f2, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    r2 = distance(f1, f2, m["ref_rule"], m["ref_fine"])
     del f2
     f0, _ = reference_field(scene, ref, R, cache)
-    d1 = distance(f0, f1, m["ref_rule"], m["ref_fine"])["l2_rel"]
+    r1 = distance(f0, f1, m["ref_rule"], m["ref_fine"])
+    d2, d1 = r2["l2_rel"], r1["l2_rel"]
     p = float(np.log2(d2 / d1)) if d1 > 0 and d2 > d1 else float("nan")
     est = d1 / (2**p - 1) if np.isfinite(p) and p > 0 else d1
     info = {"level": R, "triangulation": ref.triangulation, "solver": ref.solver,
             "n_pieces": len(f0.pieces), "d_last": d1, "d_before": d2, "rate": p, "error_est": est,
-            "stress_space": ref.stress_space, "certified": getattr(f0, "bound", None)}
+            "stress_space": ref.stress_space, "certified": getattr(f0, "bound", None),
+            "dropped_share": max(r1["dropped_share"], r2["dropped_share"])}  # of the two differences
     return cache.put_row(key, info)
 
 
@@ -403,6 +412,8 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
     m = dict(case.metrics)
     out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
            "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
+    if case.reference.kind == "finer":
+        out.update(ref_dropped_area=np.nan, ref_dropped_share=np.nan)
     ref = case.reference
     if ref.kind == "exact":
         ex = exact_reference(scene)[0]  # one that does not solve the scene failed the case before the solve
@@ -436,6 +447,8 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
         if case.check_rule:
             out["error_l2_rel_finer_rule"] = distance(field, sol, m["ref_check_rule"], m["ref_check_fine"])["l2_rel"]
         out["reference_error_est"] = ref_info["error_est"]
+        # the error is integrated over the common part of both meshes: what that leaves out
+        out.update(ref_dropped_area=err["dropped_area"], ref_dropped_share=err["dropped_share"])
     else:
         return out
     if not all(np.isfinite(err[k]) for k in ("l2", "l2_rel", "energy", "energy_rel")):

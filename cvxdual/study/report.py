@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ..files import atomic_path, write_text
+from .cases import IDENTITY
 
 LINE_KEYS = ("triangulation", "stress_space", "overrides", "solver", "units", "case")
 
@@ -74,12 +75,34 @@ def rates_table(df: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame()
     fin = d.loc[d.groupby(keys, sort=False)["level"].idxmax()]
     tab = all_r.merge(last_r[keys + ["levels", "rate_l2"]], on=keys, suffixes=("", "_last3"))
-    tab = tab.merge(fin[keys + ["n_pieces", "error_l2_rel"]], on=keys)
-    tab = tab[keys + ["levels", "rate_l2", "rate_energy", "levels_last3", "rate_l2_last3", "n_pieces", "error_l2_rel"]]
+    # against a finer reference on outline bodies with curves: the share of the body the finest
+    # error's integral left out (the meshes' polygons differ); the largest is at the coarsest level
+    dropped = ["ref_dropped_share"] if "ref_dropped_share" in d and \
+        (pd.to_numeric(d["ref_dropped_share"], errors="coerce") > 0).any() else []
+    tab = tab.merge(fin[keys + ["n_pieces", "error_l2_rel"] + dropped], on=keys)
+    tab = tab[keys + ["levels", "rate_l2", "rate_energy", "levels_last3", "rate_l2_last3", "n_pieces", "error_l2_rel"]
+              + dropped]
     return tab.rename(columns={"levels": "levels (all)", "levels_last3": "levels (last 3)",
                                "rate_l2": "rate L2 (all)", "rate_l2_last3": "rate L2 (last 3)",
                                "rate_energy": "rate energy (all)", "n_pieces": "finest pieces",
-                               "error_l2_rel": "finest rel. L2 error"})
+                               "error_l2_rel": "finest rel. L2 error", "ref_dropped_share": "finest dropped share"})
+
+
+REFERENCE_MARGIN = 2.0  # an error this close to the reference's own is not the case's alone
+
+
+def _near_reference(d: pd.DataFrame, keys: list[str]) -> list[str]:
+    """The rows of ``d`` (measured) whose error against a finer reference is within
+    :data:`REFERENCE_MARGIN` times the reference's estimated error, as ``"series level L (e
+    against est)"``."""
+    if "reference_error_est" not in d or d.empty:
+        return []
+    e = pd.to_numeric(d["error_l2_rel"], errors="coerce")
+    est = pd.to_numeric(d["reference_error_est"], errors="coerce")
+    near = d[(est > 0) & (e < REFERENCE_MARGIN * est) & (d["reference"].astype(str) != "exact")]
+    return [" ".join(str(r[k]) for k in keys if str(r[k])) + f" level {int(r['level'])} "
+            f"({float(r['error_l2_rel']):.2g} against {float(r['reference_error_est']):.2g})"
+            for _, r in near.sort_values(keys + ["level"]).iterrows()]
 
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
@@ -261,8 +284,25 @@ def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
                       "(with the displacement's error)" if eq else ""))
         else:
             how = f"against a reference ({ref})"
-        out.append(f"- `{label}`: levels {min(levels)}-{max(levels)}{size}; {how}.")
+        out.append(f"- `{label}`: levels {min(levels)}-{max(levels)}{size}; {how}{_dropped(g)}.")
     return out
+
+
+def _dropped(g: pd.DataFrame) -> str:
+    """What the integrals over the common part of the studied and reference meshes left out, in
+    the rows ``g`` (outline bodies' curves are polygons that differ between levels), if anything."""
+    if "ref_dropped_area" not in g:
+        return ""
+    area = pd.to_numeric(g["ref_dropped_area"], errors="coerce")
+    share = pd.to_numeric(g["ref_dropped_share"], errors="coerce")
+    if not np.isfinite(area).any():
+        return ""
+    if not (area > 0).any():
+        return "; the meshes cover the same region (nothing dropped)"
+    lo, hi = share[area > 0].min(), share.max()
+    return (f"; integrated over the common part of both meshes, which leaves out {area.min():.3g} to "
+            f"{area.max():.3g} of area ({100 * lo:.2g}% to {100 * hi:.2g}% of the bodies', "
+            "`ref_dropped_area`, `ref_dropped_share`): the polygons standing for curves differ between levels")
 
 
 def _num(v, fmt: str) -> str:
@@ -318,12 +358,27 @@ def markdown(df: pd.DataFrame, study, out_name: str) -> str:
         if mono:
             lines += ["Errors decrease monotonically with h: "
                       + ", ".join(f"{k} {'yes' if v else 'NO'}" for k, v in mono.items()) + ".", ""]
+        near = _near_reference(d, keys)
+        if near:
+            lines += [f"Errors within {REFERENCE_MARGIN:g} times the reference's own estimated error "
+                      "(`reference_error_est`) measure the reference as much as the case, and flatten the "
+                      "rates of the last levels: " + ", ".join(near) + ".", ""]
     bad = df[~df["status"].astype(str).str.startswith("optimal")]
     if len(bad) and cfg.get("failures", True):
-        lines += ["## Failed cases", "", md_table(bad[[c for c in ("case", "scene", "overrides", "triangulation",
-                                                                      "level", "solver", "status", "worker")
-                                                       if c in bad.columns]]), ""]
+        lines += ["## Failed cases", "", md_table(bad[failure_columns(bad, study)]), ""]
     return "\n".join(lines)
+
+
+CASE_KEYS = tuple(k for k in IDENTITY if k != "study")  # the columns that name a case (one study per table)
+
+
+def failure_columns(bad: pd.DataFrame, study=None) -> list[str]:
+    """The failed-cases table's columns: every key of a case (its tags too) that is not empty in
+    every failed row, then ``status`` and ``worker``: each row names its case whole."""
+    tags = list(dict.fromkeys(k for c in (getattr(study, "cases", None) or []) for k, _ in c.tags))
+    keys = [c for c in (*CASE_KEYS, *tags) if c in bad.columns
+            and not bad[c].isna().all() and not (bad[c].astype(str) == "").all()]
+    return keys + [c for c in ("status", "worker") if c in bad.columns]
 
 
 def write_report(df: pd.DataFrame, study, out: str | Path) -> list[Path]:

@@ -120,7 +120,7 @@ def _run(study: Study, root: Path, scheduler, workers, memory_limit, quiet: bool
             refs[rk] = hit
     missing = [i for rk, i in need_refs.items() if rk not in refs]  # recomputed even if every row is cached
     if todo or missing:
-        with _client(client, scheduler, workers, memory_limit) as cl:
+        with _silent_logs(quiet), _client(client, scheduler, workers, memory_limit, quiet) as cl:
             _execute(cl, study, cases, keys, reprs, todo, refs, store, rows, quiet, missing)
     ordered = [rows[k] for k in keys]
     if study.compare:
@@ -140,9 +140,56 @@ def _variant_label(case) -> str:
         (f" [{case.units[2]}, {case.units[3]}]" if case.units else "")
 
 
+SILENT = logging.CRITICAL + 10  # a handler level no record reaches
+NOISY = ("distributed", "tornado", "bokeh")  # the loggers Dask's processes write to stderr with
+
+
 @contextlib.contextmanager
-def _client(client, scheduler, workers, memory_limit):
-    """The Dask client: the one given, one connected to ``scheduler``, or a local cluster's."""
+def _silent_logs(quiet: bool):
+    """With ``quiet``, no log line of Dask in this process (the scheduler and nannies of a local
+    cluster run here: a failed task's traceback, a restarted worker) until the block ends; a
+    failed case is a row of the table and of the report instead. Every stream handler of those
+    loggers is raised above CRITICAL (as ``distributed`` silences its own), then restored."""
+    if not quiet:
+        yield
+        return
+    import distributed  # noqa: F401 - it sets up its handlers on import: silence those too
+    names = [n for n in list(logging.Logger.manager.loggerDict)
+             if n in NOISY or n.startswith(tuple(f"{r}." for r in NOISY))]
+    handlers = {h for n in names for h in getattr(logging.getLogger(n), "handlers", ())
+                if isinstance(h, logging.StreamHandler)}
+    old = {h: h.level for h in handlers}
+    try:
+        for h in handlers:
+            h.setLevel(SILENT)
+        yield
+    finally:
+        for h, level in old.items():
+            h.setLevel(level)
+
+
+def _quiet_worker_plugin():
+    """A worker plugin that sends the worker process's stderr (log lines, warnings, whatever a
+    library prints) to the null device: for the local cluster's own workers under ``--quiet``,
+    including those the nanny restarts (a plugin is set up on every worker that joins)."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class QuietWorker(WorkerPlugin):
+        name = "cvxdual-quiet"
+
+        def setup(self, worker):
+            import os
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 2)
+            os.close(null)
+
+    return QuietWorker()
+
+
+@contextlib.contextmanager
+def _client(client, scheduler, workers, memory_limit, quiet: bool = False):
+    """The Dask client: the one given, one connected to ``scheduler``, or a local cluster's
+    (whose workers write nothing to stderr with ``quiet``)."""
     import dask
     from distributed import Client, LocalCluster
     if client is not None:
@@ -169,12 +216,15 @@ def _client(client, scheduler, workers, memory_limit):
     with dask.config.set(local_config()):
         try:
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)  # any free port
+                                   dashboard_address=":0",  # any free port
+                                   silence_logs=SILENT if quiet else logging.ERROR)
         except ValueError as e:
             raise StudyError(f"cannot start a local Dask cluster ({e}); check --workers and --memory-limit "
                              "(e.g. 4GB)") from None
         try:
             with Client(cluster) as cl:
+                if quiet:
+                    cl.register_plugin(_quiet_worker_plugin())
                 yield cl
         finally:
             cluster.close()
