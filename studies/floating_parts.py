@@ -70,11 +70,12 @@ def rows(fast_levels, cvxpy_levels) -> pd.DataFrame:
                     t = time.perf_counter()
                     sol = cd.solve(scene, level=level, solver=solver, stress_space=space, fallback=False)
                     c, b = sol.contact, sol.bounds or {}
-                    X = sol.mesh.points[sol.pieces.nodes][:, :3]  # the pieces' corners (curved pieces: their chord triangle)
+                    X = sol.mesh.points[sol.pieces.nodes][:, :3]  # corners (a curved piece: its chord triangle)
                     e2 = (np.diff(X, axis=1, append=X[:, :1]) ** 2).sum(2).max(1)
                     area = 0.5 * np.abs(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]))
                     out.append({"scene": name, "level": level, "solver": solver, "space": space,
-                                "pieces": sol.summary()["n_pieces"], "force_rel_err": abs(c["total_force"] - load) / load,
+                                "pieces": sol.summary()["n_pieces"],
+                                "force_rel_err": abs(c["total_force"] - load) / load,
                                 "x_min": c["x_min"], "x_max": c["x_max"], "lower": b.get("energy_lower"),
                                 "upper": b.get("energy_upper"), "guaranteed": b.get("guaranteed"),
                                 "reasons": "; ".join(b.get("reasons", [])), "worst_aspect": float((e2 / area).max()),
@@ -101,15 +102,17 @@ def report(df: pd.DataFrame) -> str:
              "solved with `fallback=False`: no hand-over hides a failure.", "",
              "## Total contact force against the applied load (relative), worst over the levels", "",
              md_table(worst.reset_index()), "",
-             f"Contact zones: `|x_min + x_max|` at most {sym:.2g} mm over all runs (every scene is mirror-symmetric).", "",
+             f"Contact zones: `|x_min + x_max|` at most {sym:.2g} mm over all runs (every scene is "
+             "mirror-symmetric).", "",
              "## Certified brackets of the eq route (fast path)", "", md_table(pd.DataFrame(nested)), "",
              "Runs not guaranteed, and why:", ""]
     bad = df[(df.space == "eq") & ~df.guaranteed.astype(bool)]
     lines += [f"- {r.scene}, level {r.level}, {r.solver}: {r.reasons}; the mesh's worst triangle has "
               f"(longest edge)^2 / area = {r.worst_aspect:.3g}" for r in bad.itertuples()] or ["- none"]
+    flat = df[df.guaranteed.astype(bool)].worst_aspect.max()
     lines += ["", "The admissibility residuals are rounding, amplified where a triangle is flat (its stress "
               "gradients are differences of vertex values over a short height): compare the worst "
-              f"`(longest edge)^2 / area` of the guaranteed runs, at most {df[df.guaranteed.astype(bool)].worst_aspect.max():.3g}."]
+              f"`(longest edge)^2 / area` of the guaranteed runs, at most {flat:.3g}."]
     return "\n".join(lines) + "\n"
 
 
