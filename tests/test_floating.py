@@ -287,6 +287,24 @@ def test_balance_correction():
 
 # -- random floating scenes ------------------------------------------------------------------
 
+@pytest.mark.parametrize("E1,E2,half,block,R,depth", [(82774.0, 1000.0, 5.0, 11.0, 111.0, 5.0),
+                                                       (3028.0, 3656.0, 4.0, 8.0, 100.0, 5.0),
+                                                       (3027.0, 3626.0, 2.0, 9.0, 130.0, 7.0)])
+def test_light_punch_touching_at_one_pair(E1, E2, half, block, R, depth):
+    """Found by the property test below: a floating punch pressed so lightly that it touches at
+    one pair. The eq fast path forced a third parameter into contact (the rank test saw only the
+    pair's jump, not the edge's weighted one, so a turn about the pair looked free), took back a
+    parameter it had just released (a false fixed point in tension, admissibility 1.7), or swapped
+    whole sets round a cycle; Clarabel solved all three."""
+    case = punch(half=half, height=5.0, block=block, depth=depth, pressure=1.0, materials=((E1, 0.0), (E2, 0.0)),
+                 columns=3, gap=R)
+    for solver in ("fast", "CLARABEL"):
+        sol = cd.solve(case, level=1, solver=solver, stress_space="eq", fallback=False)
+        check_statics(sol, 2 * half, half)
+        c = sol.contact
+        assert c["x_min"] == pytest.approx(-c["x_max"], abs=1e-12 * half)  # the symmetric problem's zone
+
+
 # Poisson ratios of valid scenes: 0, or at least validate.TINY (smaller ones are refused by design)
 nus = st.floats(0.0, 0.45).filter(lambda v: v == 0.0 or v >= TINY)
 

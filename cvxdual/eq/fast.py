@@ -149,13 +149,19 @@ def well_conditioned(space: EquilibriumSpace) -> np.ndarray:
 
 
 def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
-    """``(n_c, 2, m)``: jump ``[r_y]`` at each contact parameter of the rigid motions of each
-    body alone; the parameters in contact must stop every motion that separates the bodies."""
+    """``(n_c, 2, m)``: what each contact parameter's constraint sees of the rigid motions of
+    each body alone, ``int phi [r_y] dx`` over its edge (``phi`` its end's hat; ``[r_y]`` linear
+    between the pairs); the parameters in contact must stop every motion that separates the
+    bodies. Weighted, not the jump at the parameter's pair: the two parameters at one pair see a
+    turn about it with opposite signs, so they stop it (with the pair's value alone a contact at
+    one pair looked free to turn, and the closest parameter was forced into contact, in tension)."""
     r = rigid_motions(space.mesh, joint=False)
     up, lo = space.mesh.pairs.T
     dk = r[lo, 1] - r[up, 1]  # (n_pairs, m)
     n_c = len(space.contact_y)
-    return np.stack([dk[:n_c], dk[1: n_c + 1]], 1)
+    L = np.diff(space.mesh.pair_x)[:n_c, None] / 6.0
+    a, b = dk[:n_c], dk[1: n_c + 1]
+    return np.stack([L * (2 * a + b), L * (a + 2 * b)], 1)
 
 
 def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray) -> np.ndarray:
@@ -516,11 +522,30 @@ class HybridSolver:
         """Keep the compressive parameters (``p <= 0``), add the penetrating ones (``nu < 0``);
         rounding-level tension or penetration leaves a parameter as it is: at the edge of a
         smooth contact both ``p`` and ``nu`` tend to 0, and equivalent sets would otherwise
-        alternate. Closest first (smallest opening) where the set must be completed."""
+        alternate. Closest first (smallest opening) where the set must be completed, a parameter
+        just released last: its opening reads 0 (it was in contact), and taking it back first made
+        a set with a tensile parameter look like a fixed point."""
         p, nu = state["p"], state["nu"]
-        tol_p = SET_TOL * max(float(np.abs(p).max(initial=0.0)), 1e-300)
-        tol_nu = SET_TOL * max(float(np.abs(nu).max(initial=0.0)), float(np.abs(self.cy).max(initial=0.0)), 1e-300)
-        return cover(np.where(A, p <= tol_p, nu < -tol_nu), np.where(A, -1.0, nu), self.jumps)
+        tol_p, tol_nu = self._set_tolerances(p, nu)
+        return cover(np.where(A, p <= tol_p, nu < -tol_nu), np.where(A, np.inf, nu), self.jumps)
+
+    def _set_tolerances(self, p: np.ndarray, nu: np.ndarray) -> tuple[float, float]:
+        """The tension and penetration that count as rounding (:data:`SET_TOL` of their scales)."""
+        return (SET_TOL * max(float(np.abs(p).max(initial=0.0)), 1e-300),
+                SET_TOL * max(float(np.abs(nu).max(initial=0.0)), float(np.abs(self.cy).max(initial=0.0)), 1e-300))
+
+    def one_change(self, A: np.ndarray, state: dict) -> np.ndarray:
+        """:meth:`next_set` damped to one change: release the most tensile parameter or add the
+        most penetrating one, whichever violates more against its own scale (a cycle's way out)."""
+        p, nu = state["p"], state["nu"]
+        tol_p, tol_nu = self._set_tolerances(p, nu)
+        tension = np.where(A & (p > tol_p), p / max(float(np.abs(p).max(initial=0.0)), 1e-300), 0.0)
+        depth = np.where(~A & (nu < -tol_nu), -nu / max(float(np.abs(nu).max(initial=0.0)), 1e-300), 0.0)
+        keep = A.copy()
+        if max(tension.max(initial=0.0), depth.max(initial=0.0)) > 0:
+            k = int(np.argmax(tension)) if tension.max() >= depth.max() else int(np.argmax(depth))
+            keep[k] = not A[k]
+        return cover(keep, np.where(A, np.inf, nu), self.jumps)
 
     def run(self, active: np.ndarray | None = None) -> dict:
         """Iterate the active set from ``active`` (contact parameters ``(n_c, 2)``; all in

@@ -69,19 +69,27 @@ def _stuck(solver: ActiveSetSolver, why: str) -> SolverError:
 
 def iterate(solver: ActiveSetSolver, A: np.ndarray) -> tuple[np.ndarray, object]:
     """Iterate from the set ``A`` to the set that reproduces itself; return it and its solution.
-    A set seen before (the start included) is a cycle, reported with the solver's advice, as is
-    no fixed point in :data:`MAX_ITER` iterations."""
+    A set seen before (the start included) is a cycle: a solver with a ``one_change(A, state)``
+    step goes on from there one change at a time (the full update swaps whole sets where few
+    unknowns decide, e.g. a punch touching at one pair); a second cycle, or one without such a
+    step, is reported with the solver's advice, as is no fixed point in :data:`MAX_ITER` iterations."""
     A = np.asarray(A, bool)
     seen = {A.tobytes()}
+    step = solver.next_set
     for it in range(1, MAX_ITER + 1):
         state = solver.solve_set(A)
-        new = solver.next_set(A, state)
+        new = step(A, state)
         solver.stats.iterations = it
         log.debug("%s: iteration %d, %d active, %d change", solver.what, it, int(A.sum()), int((new != A).sum()))
         if np.array_equal(new, A):
             return A, state
         if new.tobytes() in seen:
-            raise _stuck(solver, f"the active set cycles after {it} iterations")
+            if step != solver.next_set or not hasattr(solver, "one_change"):
+                raise _stuck(solver, f"the active set cycles after {it} iterations")
+            step, seen = solver.one_change, {A.tobytes()}
+            new = step(A, state)
+            if np.array_equal(new, A):
+                return A, state
         seen.add(new.tobytes())
         A = new
     raise _stuck(solver, f"no convergence in {MAX_ITER} active-set iterations")
