@@ -95,11 +95,15 @@ def _cmd_solve(args) -> int:
     from .files import sweep_leftovers
     from .geometry.triangulation import check_triangulation
     from .model.solvers import resolve_solver
+    from .outputs.figures import Plot, names_plot, parse_plots
     from .outputs.output_set import check_output_dir, write_outputs
     from .pipeline import solve
     from .scene.scenefile import load_scene, parse_assignment
     from .validate import file_stem
 
+    plots = parse_plots(args.plots)  # an unknown figure name: one error line before any work
+    if names_plot(args.plots, Plot.BOUNDS) and not (args.bounds or args.stress_space == "eq"):
+        raise CvxdualError("--plots bounds needs certified bounds: add --bounds or --stress-space eq")
     time_limit = check_time_limit(args.time_limit)
     # the hard stop covers reading the scene too (bounded work: a .geo file is read, never run)
     hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
@@ -116,8 +120,8 @@ def _cmd_solve(args) -> int:
                     max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
     written, t_write = [], None
     if out is not None:
-        with phase("write", start=f"outputs to {out}/" if args.plots else None) as p:
-            written = write_outputs(sol, out, plots=args.plots)
+        with phase("write", start=f"outputs to {out}/" if plots else None) as p:
+            written = write_outputs(sol, out, plots=plots)
             p.detail = f"{len(written)} files"
         t_write = p.seconds
     print(human_summary(sol, written, t_write))
@@ -210,9 +214,12 @@ def build_parser() -> argparse.ArgumentParser:
     talk.add_argument("--quiet", action="store_true", help="no progress lines on stderr (warnings and errors only)")
     talk.add_argument("--verbose", action="store_true", help="also the solver's own log and the fast path's "
                       "iterations, on stderr")
-    s.add_argument("--plots", action=argparse.BooleanOptionalAction, default=False,
-                   help="also draw the figures (stress.png, deformed.png, pressure.png, bounds.png): matplotlib's "
-                   "import and drawing cost more than a whole small run (default: --no-plots)")
+    from .outputs.figures import plot_names  # no matplotlib: that loads only to draw
+    s.add_argument("--plots", nargs="?", const=True, default=None, metavar="NAMES",
+                   help="also draw figures: alone, the default set (stress, deformed, pressure, and bounds where "
+                   f"computed); or comma-separated names from {plot_names()}, or all (each NAME.png); "
+                   "matplotlib's import and drawing cost more than a whole small run (default: --no-plots)")
+    s.add_argument("--no-plots", dest="plots", action="store_const", const=None, help="draw no figures (the default)")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")
     s.set_defaults(func=_cmd_solve)
     from .study.command import add_parser as add_study_parser

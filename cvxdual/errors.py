@@ -7,7 +7,8 @@ problem and how to fix it; the CLI prints it as one line and exits non-zero.
 from __future__ import annotations
 
 __all__ = ["AccuracyError", "CvxdualError", "MeshError", "ModelError", "NoAdmissibleStressError", "OutputError",
-           "SceneError", "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError"]
+           "SceneError", "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownPlotError",
+           "UnknownSolverError"]
 
 
 class CvxdualError(Exception):
@@ -48,6 +49,10 @@ class TimeLimitError(CvxdualError):
 
 class UnknownSolverError(CvxdualError, ValueError):
     """The requested solver is not known or not installed."""
+
+
+class UnknownPlotError(CvxdualError, ValueError):
+    """A figure name that is not one of :class:`cvxdual.outputs.figures.Plot`."""
 
 
 class ModelError(CvxdualError, ValueError):

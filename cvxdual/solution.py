@@ -143,6 +143,31 @@ class Solution:
     # every column (n_col, 2) (cvxdual.eq.columns); empty on flat faces, None for "p0"
     column_stress: np.ndarray | None = None
 
+    def __repr__(self) -> str:
+        """A few lines, not the arrays (those ran to 100 kB): what was solved, how, and the main
+        results. Never raises: a solution built by hand may lack any of them."""
+        def get(fn, default="?"):
+            try:
+                return fn()
+            except Exception:  # noqa: BLE001 - a repr shows what it can
+                return default
+
+        L, S = get(lambda: tuple(self.scene.units), ("L", "S"))
+        n = get(lambda: 3 * self.space.n_tri if self.stress_space == "eq" else self.system.n_pieces)
+        c = self.contact if isinstance(self.contact, Mapping) else {}
+        force = get(lambda: f"{float(c['total_force']):.4g} {S}*{L}")
+        lines = [f"Solution({get(lambda: self.scene.name)!r}, stress space {self.stress_space}, "
+                 f"{self.triangulation}, level {self.level}, {n} pieces",
+                 f"  solver {get(lambda: self.solver.solver)}: {get(lambda: self.solver.status)}; "
+                 f"objective {get(lambda: format(float(self.objective), '.6g'))}; contact force {force}, "
+                 f"{get(lambda: c['n_active'])} active pairs"]
+        if self.bounds is not None:
+            b = self.bounds
+            lo, hi, gap = (get(lambda k=k, f=f: format(float(b[k]), f)) for k, f in
+                           (("energy_lower", ".6g"), ("energy_upper", ".6g"), ("gap", ".3g")))
+            lines.append(f"  bounds: {lo} <= J(u) <= {hi}, G = {gap} {S}*{L}^2")
+        return "\n".join(lines) + ")"
+
     @property
     def mesh(self):
         return self.system.mesh

@@ -354,7 +354,7 @@ def test_polygon_holes_run_counter_clockwise():
 def test_plots_draw_the_true_outline():
     """The drawn outline of an outline body follows its arcs (the hole round, not the mesh's
     polygon) and closes on the face."""
-    from cvxdual.outputs.plots import body_outline
+    from cvxdual.outputs.views import body_outline
     body = load_scene("block-with-hole").bodies[1]
     outer, hole = body_outline(body)
     assert np.allclose(outer[0], outer[-1])  # closed: back at the face's left end

@@ -22,13 +22,12 @@ from ..errors import OutputError
 from ..files import json_text, replace_dir, staged_dir, temp_beside
 from ..solution import CONTACT_COLUMNS, FLAG_COLUMNS
 from ..validate import short
-from .figures import DPI, figures
+from .figures import DPI, Plot, figures, parse_plots
 from .vtu import write_vtu
 
 # PNGs with fast compression (files 20-35% larger, half the compression time)
 PNG_OPTIONS = {"compress_level": 1}
-SET_FILES = ("summary.json", "contact.csv", "solution.vtu", "stress.png", "deformed.png", "pressure.png",
-             "bounds.png")
+SET_FILES = ("summary.json", "contact.csv", "solution.vtu", *(p.file for p in Plot))
 # per-file temporaries of earlier versions (files.temp_beside), removed with the set they are in
 _OLD_TEMP = re.compile(r"\.(" + "|".join(re.escape(n) for n in (*SET_FILES, "probe")) + r")\.[^/]+\.tmp")
 
@@ -114,14 +113,18 @@ def write_contact_csv(sol, path) -> None:
     np.savetxt(path, cols, fmt=fmt, delimiter=",", header=",".join(CONTACT_COLUMNS), comments="")
 
 
-def write_outputs(sol, out: str | Path, plots: bool = False) -> list[Path]:
+def write_outputs(sol, out: str | Path, plots=False) -> list[Path]:
     """Write every output of ``sol`` as the set in directory ``out``; return the paths written.
     ``plots``: the figures too (:mod:`cvxdual.outputs.figures`; matplotlib's import and drawing
-    take longer than a whole small run, so they are written on request).
+    take longer than a whole small run, so they are written on request): ``True`` for the default
+    set, or which (``"stress,mesh"``, a list of names or :class:`~cvxdual.outputs.figures.Plot`;
+    :func:`~cvxdual.outputs.figures.parse_plots`, which refuses an unknown name before anything
+    is written).
 
     The set replaces ``out`` whole (see the module docstring): any failure leaves the previous
     set (or none), never a mix, and the error says so."""
     out = Path(out)
+    plots = parse_plots(plots)
     real = check_output_dir(out)
     writers = {
         "summary.json": lambda p: p.write_text(json_text(sol.summary())),
@@ -129,7 +132,7 @@ def write_outputs(sol, out: str | Path, plots: bool = False) -> list[Path]:
         "solution.vtu": lambda p: write_vtu(sol, p),
     }
     if plots:
-        for name, fig in figures(sol).items():  # noqa: B007 - fig is bound in the lambda
+        for name, fig in figures(sol, plots).items():  # noqa: B007 - fig is bound in the lambda
             writers[name] = lambda p, fig=fig: fig.savefig(p, dpi=DPI, format="png", pil_kwargs=PNG_OPTIONS)
     assert set(writers) <= set(SET_FILES)
     try:

@@ -1,338 +1,31 @@
-"""Plots of a solution, matplotlib-style: every function draws on ``ax`` (a new pyplot axes
-if none is given) and returns it; files are written by :mod:`cvxdual.outputs.output_set`.
+"""The contact plots and the bound map.
 
-Every axis is labelled in the scene's units (``L, S = sol.scene.units``). Nothing here chooses
-a matplotlib backend: that is the caller's (the output layer draws on
-:class:`matplotlib.figure.Figure` objects, which need none).
+Every plot of a solution, here and in :mod:`.maps` (the field maps), is matplotlib-style: it
+draws on ``ax`` (a new pyplot axes if none is given, :func:`~cvxdual.outputs.views.axes`) and
+returns it; files are written by :mod:`cvxdual.outputs.output_set`. Every axis is labelled in
+the scene's units (``L, S = sol.scene.units``). Nothing here chooses a matplotlib backend: that
+is the caller's (the output layer draws on :class:`matplotlib.figure.Figure` objects, which
+need none).
+
+The contact zone (default :func:`~cvxdual.outputs.views.contact_window`): the faces at true
+displacement scale (:func:`plot_deformed`), the gap and the faces' approach at the contact pairs
+(:func:`plot_gap`), the contact pressure (:func:`plot_pressure`). The bound map
+(:func:`plot_bound_map`): where the certified bound ``G`` comes from.
 """
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
-from matplotlib import artist
-from matplotlib.backends.backend_agg import RendererAgg
-from matplotlib.collections import Collection, LineCollection
-from matplotlib.colors import LogNorm, Normalize
-from matplotlib.path import Path
-from matplotlib.transforms import IdentityTransform
+from matplotlib.collections import LineCollection
+from matplotlib.colors import LogNorm
 
-from ..geometry.pieces import piece_outlines, slab_outlines
+from ..eq.space import EquilibriumSpace
 from ..reference.exact import exact_field
+from .maps import column_strips, stress_support
+from .render import Triangles, areas, sizes
+from .views import axes, bodies_window, contact_window, outlines
 
-SUPERSAMPLE = 3  # samples per pixel and direction when filling small pieces (see Triangles)
-SMALL = 4.0  # pieces this wide and tall in pixels (on average) or less are supersampled
-ZOOM_SHARE = 0.5  # a contact window wider than this share of the bodies adds nothing to the whole view
 MESH_LINES = 80  # most mesh columns (or layers) in the contact view: lines 6 px or more apart at 4 in
-
-
-def _axes(ax):
-    if ax is None:
-        import matplotlib.pyplot as plt
-        _, ax = plt.subplots()
-    return ax
-
-
-def _strips(poly: np.ndarray) -> np.ndarray:
-    """Triangles ``(m, t, 3, 2)`` covering outlines ``poly`` ``(m, 2k, 2)`` of :func:`piece_outlines`
-    (``k`` points along the lower bound left to right, then along the upper bound right to left):
-    two per strip between neighbouring abscissae, which is right for the concave pieces too."""
-    k = poly.shape[1] // 2
-    lo, hi = poly[:, :k], poly[:, :k - 1:-1]
-    a, b, c, d = lo[:, :-1], lo[:, 1:], hi[:, 1:], hi[:, :-1]
-    return np.stack([a, b, c, a, c, d], axis=2).reshape(len(poly), 2 * (k - 1), 3, 2)
-
-
-def _triangles(pieces) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles ``(n, 3, 2)`` covering the pieces (the curved ones by their outlines,
-    :func:`piece_outlines`, cut into strips) and the piece of each."""
-    tris, ids = [pieces.tri_vertices], [pieces.tri_piece]
-    for pid, poly in piece_outlines(pieces):
-        strips = _strips(poly)
-        tris.append(strips.reshape(-1, 3, 2))
-        ids.append(np.repeat(pid, strips.shape[1]))
-    return np.concatenate(tris), np.concatenate(ids)
-
-
-def _locate(tris: np.ndarray, w: int, h: int, s: int, chunk: int = 1 << 17) -> tuple[np.ndarray, ...]:
-    """The samples of a ``w x h`` grid of cells inside triangles ``(n, 3, 2)`` (in cells):
-    ``(cell, triangle, l1, l2)`` per hit (barycentric ``l1, l2``; a sample on a shared edge is
-    in both, the later last). One sample per cell, so that the ``s x s`` cells of a pixel have
-    ``s**2`` different abscissae and ordinates (n-rooks: an edge along the pixel rows gets
-    ``s**2`` shades, the same all along). Each triangle tests the cells of its bounding box."""
-    x, y = tris[..., 0], tris[..., 1]
-    ex, ey = x[:, 1:] - x[:, :1], y[:, 1:] - y[:, :1]  # edges from vertex 0
-    det = ex[:, 0] * ey[:, 1] - ex[:, 1] * ey[:, 0]
-    keep = det != 0
-    inv = np.divide(1.0, det, out=np.zeros_like(det), where=keep)
-    # per triangle: vertex 0 and the rows of the map (px - x0, py - y0) -> barycentric (l1, l2)
-    coef = np.stack([x[:, 0], y[:, 0], ey[:, 1] * inv, -ex[:, 1] * inv, -ey[:, 0] * inv, ex[:, 0] * inv], 1)
-
-    def cells(v, n):  # first and past-the-last cell of each triangle's extent
-        lo, hi = _bounds(v)
-        return np.clip(np.floor(lo), 0, n).astype(np.int64), np.clip(np.floor(hi) + 1, 0, n).astype(np.int64)
-
-    (i0, i1), (j0, j1) = cells(x, w), cells(y, h)
-    nx = i1 - i0
-    count = np.where(keep, nx * (j1 - j0), 0)
-    ends = np.cumsum(count)
-    hits, start = [], 0
-    while start < len(tris):
-        stop = max(int(np.searchsorted(ends, ends[start] - count[start] + chunk, side="right")), start + 1)
-        c = count[start:stop]
-        k = np.repeat(np.arange(start, stop), c)
-        dj, di = np.divmod(np.arange(len(k)) - np.repeat(np.cumsum(c) - c, c), nx[k])
-        ci, cj = i0[k] + di, j0[k] + dj
-        flat = cj * w + ci
-        m = coef[k]
-        dx = ci + ((cj % s) + 0.5) / s - m[:, 0]
-        dy = cj + ((ci % s) + 0.5) / s - m[:, 1]
-        l1, l2 = m[:, 2] * dx + m[:, 3] * dy, m[:, 4] * dx + m[:, 5] * dy
-        inside = (l1 >= 0) & (l2 >= 0) & (l1 + l2 <= 1)
-        hits.append((flat[inside], k[inside], l1[inside].astype(np.float32), l2[inside].astype(np.float32)))
-        start = stop
-    return tuple(np.concatenate(a) for a in zip(*hits, strict=True))  # one chunk at least: n > 0
-
-
-# figure -> [(triangles, grid, hits)]: the maps of one figure drawn from the same pieces in the
-# same frame (s22 and the maximum shear) locate their samples once; gone with the figure
-_HITS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _hits(fig, tris: np.ndarray, w: int, h: int, s: int) -> tuple[np.ndarray, ...]:
-    """:func:`_locate`, remembered for ``fig``."""
-    seen = _HITS.setdefault(fig, [])
-    for t, grid, hits in seen:  # the same to a millionth of a cell: another map's transform rounds differently
-        if grid == (w, h, s) and t.shape == tris.shape and np.allclose(t, tris, rtol=0, atol=1e-6):
-            return hits
-    hits = _locate(tris, w, h, s)
-    seen.append((tris, (w, h, s), hits))
-    return hits
-
-
-def _supersampled(renderer, gc, px: np.ndarray, colors: np.ndarray, flat, small: np.ndarray, clip, fig) -> None:
-    """Triangles ``px`` (display pixels) drawn as an image of the pixels of ``clip`` (a display
-    box), each the mean of :data:`SUPERSAMPLE` x :data:`SUPERSAMPLE` samples: Agg fills the
-    large triangles at that resolution, then the ``small`` ones are point-sampled over them
-    (:func:`_locate`), colours ``colors`` ``(n, 3, 4)`` at the vertices (``flat`` ``(n, 4)``
-    where one per triangle). The pieces' colours by covered area, in one image: filling the
-    large ones on the screen instead would leave light seams where each covers part of a pixel."""
-    s = SUPERSAMPLE
-    x0, y0 = max(int(np.floor(clip.x0)), 0), max(int(np.floor(clip.y0)), 0)
-    w = min(int(np.ceil(clip.x1)), int(renderer.width)) - x0
-    h = min(int(np.ceil(clip.y1)), int(renderer.height)) - y0
-    if w <= 0 or h <= 0:
-        return
-    sub = (px - (x0, y0)) * s
-    if small.all():
-        samples = np.zeros((h * s * w * s, 4), np.float32)
-    else:
-        off = RendererAgg(w * s, h * s, renderer.dpi * s)
-        off.draw_gouraud_triangles(off.new_gc(), sub[~small], colors[~small], IdentityTransform())
-        samples = np.asarray(off.buffer_rgba())[::-1].reshape(-1, 4) / np.float32(255)  # bottom row first
-        samples[:, :3] *= samples[:, 3:]  # premultiplied: means weigh colours by alpha
-    cell, k, l1, l2 = _hits(fig, sub[small], w * s, h * s, s)
-    if flat is not None:
-        pm = flat[small] * flat[small, 3:]
-        samples[cell] = pm[k]
-    else:
-        pm = colors[small] * colors[small, :, 3:]
-        samples[cell] = pm[k, 0] * (1 - l1 - l2)[:, None] + pm[k, 1] * l1[:, None] + pm[k, 2] * l2[:, None]
-    total = samples.reshape(h, s, w, s, 4).sum(axis=(1, 3))
-    im = np.empty((h, w, 4), np.uint8)
-    im[..., :3] = np.rint(255 * np.clip(total[..., :3] / np.maximum(total[..., 3:], 1e-12), 0, 1))
-    im[..., 3] = np.rint(255 / (s * s) * total[..., 3])
-    renderer.draw_image(gc, x0, y0, im)  # bottom row first, as draw_image takes it
-
-
-def _bounds(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least and greatest of each row of ``v`` ``(n, 3)`` (by column: a reduction over axis 1 is 3x slower)."""
-    a, b, c = v[:, 0], v[:, 1], v[:, 2]
-    return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-
-
-class Triangles(Collection):
-    """Triangles ``(n, 3, 2)``, each with its own three vertices, coloured by ``array``: one
-    value per triangle (flat, as the P0 stresses are) or one per vertex (``3 n`` values, linear:
-    Gouraud shading), with no path per triangle and no edges, in one ``draw_gouraud_triangles``
-    call; on Agg as one supersampled image (:func:`_supersampled`) where some are under
-    :data:`SMALL` pixels: Agg gives a pixel the colour of the triangle over most of it, so
-    pieces of about a pixel alias into moire (levels 4-6)."""
-
-    def __init__(self, tris: np.ndarray, **kw):
-        super().__init__(**kw)
-        self._tris = np.ascontiguousarray(tris, dtype=float)
-
-    def get_paths(self):
-        """One path per triangle, made only if asked (hit tests); drawing needs none."""
-        if self._paths is None:
-            self._paths = [Path(t) for t in self._tris]
-        return self._paths
-
-    @artist.allow_rasterization
-    def draw(self, renderer):
-        n = len(self._tris)
-        if not self.get_visible() or not n:
-            return
-        renderer.open_group(type(self).__name__, gid=self.get_gid())
-        self.update_scalarmappable()
-        c = self._facecolors
-        colors = c.reshape(n, 3, 4) if len(c) == 3 * n else np.broadcast_to(c[:, None], (n, 3, 4))
-        gc = renderer.new_gc()
-        self._set_gc_clip(gc)
-        gc.set_linewidth(0)
-        trans = self.get_transform().frozen()
-        if isinstance(renderer, RendererAgg):
-            px = trans.transform(self._tris.reshape(-1, 2)).reshape(n, 3, 2)
-            (lx, hx), (ly, hy) = _bounds(px[..., 0]), _bounds(px[..., 1])
-            small = hx - lx + hy - ly < 2 * SMALL
-            if small.any():
-                _supersampled(renderer, gc, px, colors, c if len(c) == n else None, small,
-                              self.get_clip_box() or self.figure.bbox, self.figure)
-            else:  # pieces of several pixels: Agg's own fill, as good and faster
-                renderer.draw_gouraud_triangles(gc, px, colors, IdentityTransform())
-        else:  # vector output: the viewer fills the shapes
-            renderer.draw_gouraud_triangles(gc, self._tris, colors, trans)
-        gc.restore()
-        renderer.close_group(type(self).__name__)
-
-
-def _in_window(tris: np.ndarray, window) -> np.ndarray:
-    """Which triangles ``(n, 3, 2)`` meet the box ``(x0, x1, y0, y1)``."""
-    (lx, hx), (ly, hy) = _bounds(tris[..., 0]), _bounds(tris[..., 1])
-    return (hx >= window[0]) & (lx <= window[1]) & (hy >= window[2]) & (ly <= window[3])
-
-
-def body_outline(body, n: int = 400) -> list[np.ndarray]:
-    """Closed outlines of a body on its true (curved) face and true arcs: the boundary, then
-    each hole of an outline body."""
-    x0, x1 = body.x_range
-    xs = np.linspace(x0, x1, n)
-    face = np.stack([xs, body.face.value(xs)], 1)
-    if body.is_column:
-        far = np.array([[x1, body.far], [x0, body.far]])
-        return [np.concatenate([face, far, face[:1]])]
-    path = [s.sample() for p in body.outline.path for s in p.segments]
-    holes = [np.concatenate([s.sample() for s in h.segments]) for h in body.outline.holes]
-    return [np.concatenate([face, *path]), *holes]
-
-
-def _outlines(ax, sol, **kw) -> None:
-    lines = [line for bm in sol.mesh.bodies for line in body_outline(bm.body)]
-    ax.add_collection(LineCollection(lines, **kw), autolim=False)
-
-
-def bodies_window(sol) -> tuple[float, float, float, float]:
-    """``(x0, x1, y0, y1)``: both bodies with a 3% margin."""
-    pts = np.concatenate([line for b in sol.scene.bodies for line in body_outline(b, 3)])
-    (x0, y0), (x1, y1) = pts.min(0), pts.max(0)
-    m = 0.03 * max(x1 - x0, y1 - y0)
-    return x0 - m, x1 + m, y0 - m, y1 + m
-
-
-def contact_zone(sol) -> tuple[float, float] | None:
-    """``(x_min, x_max)`` of the active pairs, or of all contact pairs when none is active
-    (``None`` without pairs)."""
-    c = sol.contact
-    if c["x_min"] is not None:
-        return c["x_min"], c["x_max"]
-    return (float(c["x"].min()), float(c["x"].max())) if len(c["x"]) else None
-
-
-def contact_window(sol) -> tuple[float, float, float, float] | None:
-    """``(x0, x1, y0, y1)`` around the contact zone (:func:`contact_zone`): widened on each side
-    by its half-width (at least two pair spacings, so that one active pair gets a window), within
-    the bodies' x range, and as deep as wide, or the zone's width above and below the interface
-    when more (a half model's zone starts on its edge: the stresses peak 0.8 zone widths deep)."""
-    zone = contact_zone(sol)
-    if zone is None:
-        return None
-    (a, b), x = zone, sol.contact["x"]
-    i, j = np.searchsorted(x, [a, b])
-    step = float(np.diff(x)[max(i - 1, 0):j + 1].max()) if len(x) > 1 else 0.0
-    hw = max((b - a) / 2, 2 * step, 1e-9 * sol.scene.length_scale)
-    (lo, hi), lower = sol.scene.x_extent, sol.scene.lower
-    yc = float(lower.face.value((a + b) / 2))
-    x0, x1 = max(a - hw, lo), min(b + hw, hi)
-    depth = max((x1 - x0) / 2, b - a)
-    return x0, x1, yc - depth, yc + depth
-
-
-def zoom_window(sol):
-    """:func:`contact_window` where it is narrower than :data:`ZOOM_SHARE` of the bodies (else
-    ``None``: the whole view shows the zone as well)."""
-    w, (x0, x1) = contact_window(sol), sol.scene.x_extent
-    return w if w is not None and w[1] - w[0] < ZOOM_SHARE * (x1 - x0) else None
-
-
-STRESS_COMPONENTS = {
-    "s11": (lambda t: t[:, 0], "s11", "s11"),
-    "s22": (lambda t: t[:, 1], "s22 (contact direction)", "s22"),
-    "s12": (lambda t: t[:, 2], "s12", "s12"),
-    "shear": (lambda t: np.sqrt(((t[:, 0] - t[:, 1]) / 2) ** 2 + t[:, 2] ** 2), "maximum shear stress",
-              "max shear"),
-}
-
-
-def _column_strips(sol) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The slabs of the curved pieces of a solution with an equilibrium space cut into strips:
-    triangles ``(n, 3, 2)``, their slab, and the column stress ``(0, g(x), 0)`` at their vertices
-    ``(n, 3, 3)`` (``None`` for a P0 solution's bounds)."""
-    space = sol.space
-    strips = _strips(slab_outlines(space.pieces))  # (m, t, 3, 2)
-    slab = np.repeat(np.arange(len(strips)), strips.shape[1])
-    tris = strips.reshape(-1, 3, 2)
-    if sol.column_stress is None:  # a P0 solution's bounds: the geometry only
-        return tris, slab, None
-    col = space.slab_column[slab]
-    x0, x1 = (space.faces.x[space.columns[col], e][:, None] for e in (0, 1))
-    t = (tris[..., 0] - x0) / (x1 - x0)
-    g = sol.column_stress[col, 0][:, None] * (1 - t) + sol.column_stress[col, 1][:, None] * t
-    return tris, slab, np.stack([np.zeros_like(g), g, np.zeros_like(g)], -1)
-
-
-def _stress_field(sol, component: str) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles ``(n, 3, 2)`` covering the bodies and ``component`` on each: ``(n,)`` (P0) or
-    ``(n, 3)`` at the vertices (``eq``: linear on every sub-triangle and column strip)."""
-    fn = STRESS_COMPONENTS[component][0]
-    if sol.stress_space == "eq":
-        P = sol.space.sub_points()
-        values = fn(sol.stress.reshape(-1, 3)).reshape(len(P), 3)
-        if not len(sol.space.pieces.slabs):
-            return P, values
-        tris, _, col = _column_strips(sol)
-        return np.concatenate([P, tris]), np.concatenate([values, fn(col.reshape(-1, 3)).reshape(len(tris), 3)])
-    tris, ids = _triangles(sol.pieces)
-    return tris, fn(sol.stress)[ids]
-
-
-def plot_stress(sol, component: str = "s22", ax=None, colorbar: bool = True, cmap: str = "viridis",
-                window=None, cax=None):
-    """One stress component (``s11``, ``s22``, ``s12`` or ``shear``) on the bodies, equal
-    aspect: constant per piece (``p0``) or linear on every sub-triangle (``eq``). ``window``
-    ``(x0, x1, y0, y1)`` (e.g. :func:`contact_window`) zooms, drawing only the pieces in it;
-    colours span the whole field either way, so zoom and whole view share a colour bar."""
-    ax = _axes(ax)
-    L, S = sol.scene.units
-    _, title, short = STRESS_COMPONENTS[component]
-    tris, val = _stress_field(sol, component)
-    lo, hi = float(val.min()), float(val.max())
-    scale = max(abs(lo), abs(hi))  # a field constant to 0.1% (the patch test) in one colour, not its rounding noise
-    pad = 0.5 * max(1e-3 * scale - (hi - lo), 0.0) if scale else 1.0
-    norm = Normalize(lo - pad, hi + pad)
-    if window is None:
-        window = bodies_window(sol)
-    else:
-        keep = _in_window(tris, window)
-        tris, val = tris[keep], val[keep]
-    pc = ax.add_collection(Triangles(tris, array=val.ravel(), cmap=cmap, norm=norm), autolim=False)
-    _outlines(ax, sol, colors="k", linewidths=0.5)
-    ax.set(xlim=window[:2], ylim=window[2:], aspect="equal", title=title, xlabel=f"x [{L}]", ylabel=f"y [{L}]")
-    if colorbar:
-        cb = ax.figure.colorbar(pc, ax=None if cax is not None else ax, cax=cax, label=f"{short} [{S}]")
-        cb.ax.ticklabel_format(useOffset=False)  # -99.98, not 0.02 under a "-1e2" that reads as a tick
-    return ax
 
 
 def _nice_below(v: float) -> float:
@@ -399,8 +92,8 @@ def plot_deformed(sol, ax=None, window=None):
     faces at equal x (:func:`_faces`). Where the lower face's curvature would leave the gap
     invisible (a conforming contact), heights are drawn above it, ``y - f''(x)``: a vertical
     shift at each x, which keeps the order of the faces there. ``window`` is ``(x0, x1, ...)``
-    (default :func:`contact_window`)."""
-    ax = _axes(ax)
+    (default :func:`~cvxdual.outputs.views.contact_window`)."""
+    ax = axes(ax)
     L, _ = sol.scene.units
     window = window or contact_window(sol) or bodies_window(sol)
     x0, x1 = window[:2]
@@ -439,13 +132,13 @@ def plot_deformed(sol, ax=None, window=None):
     return ax
 
 
-def _y_range(ax, values: np.ndarray, above: float, scale: float) -> None:
+def _y_range(ax, values: np.ndarray, above: float, scale: float, below: float = 0.05) -> None:
     """y limits from zero or below up to above ``values``, ``above`` of their span more on top
-    (a legend's room); a uniform field's rounding noise is not blown up to the axis height, and
-    all-zero values get the span ``scale`` (of the quantity in the run)."""
+    (a legend's room) and ``below`` under; a uniform field's rounding noise is not blown up to the
+    axis height, and all-zero values get the span ``scale`` (of the quantity in the run)."""
     top, bottom = max(float(values.max(initial=0.0)), 0.0), min(float(values.min(initial=0.0)), 0.0)
-    span = top - bottom or scale or 1.0
-    ax.set_ylim(bottom - 0.05 * span, top + above * span)
+    span = max(top - bottom, 1e-3 * scale) or 1.0  # rounding noise (1e-15 of a flat contact) is not a curve
+    ax.set_ylim(bottom - below * span, top + above * span)
     ax.ticklabel_format(axis="y", useOffset=False)
 
 
@@ -455,23 +148,35 @@ def _pairs_in(x: np.ndarray, xlim) -> np.ndarray:
     return np.arange(max(i - 1, 0), min(j + 1, len(x)))
 
 
+def is_equilibrium(sol) -> bool:
+    """Whether ``sol`` has equilibrium stresses (its displacement is then the bounds' ``v_h``)."""
+    return isinstance(stress_support(sol), EquilibriumSpace)
+
+
 def plot_gap(sol, ax=None, xlim=None):
-    """Along the contact pairs in ``xlim`` (default :func:`contact_window`): the initial gap,
+    """Along the contact pairs in ``xlim`` (default :func:`~cvxdual.outputs.views.contact_window`): the initial gap,
     the faces' approach (``relative_displacement``: it closes the gap; their difference, shaded,
-    is the opening, ``>= 0`` without penetration) and the active pairs."""
-    ax = _axes(ax)
+    is the opening, ``>= 0`` without penetration) and, in a row of marks along the bottom (gid
+    ``active pairs``), the pairs the solution's contact mask ``sol.contact["active"]`` marks
+    active: the pairs with a contact force. With equilibrium stresses the displacement drawn is
+    the bounds' admissible ``v_h``, which need not close the gap where the pressure acts (that
+    opening is counted in ``G``): a mark is a pair under pressure, not a point of the curve."""
+    ax = axes(ax)
     L, _ = sol.scene.units
     c = sol.contact
     xlim = xlim or (contact_window(sol) or bodies_window(sol))[:2]
     k = _pairs_in(c["x"], xlim)
-    x, gap, rel, act = c["x"][k], c["gap"][k], c["relative_displacement"][k], c["active"][k]
+    x, gap, rel, act = c["x"][k], c["gap"][k], c["relative_displacement"][k], np.asarray(c["active"][k], bool)
+    eq = is_equilibrium(sol)
     ax.fill_between(x, rel, gap, color="tab:green", alpha=0.2, lw=0, label="opening (gap - approach)")
     ax.plot(x, gap, "k--", lw=1, label="initial gap")
-    ax.plot(x, rel, "-", color="tab:blue", lw=1.2, label="approach (relative displacement)")
-    ax.plot(x[act], rel[act], "o", color="tab:red", ms=3, label="active pairs")
-    _y_range(ax, np.r_[gap, rel], 0.3, float(np.abs(sol.displacement).max()))
-    ax.set(xlim=xlim, xlabel=f"x [{L}]", ylabel=f"normal gap and approach [{L}]",
-           title="gap and approach at the contact pairs")
+    ax.plot(x, rel, "-", color="tab:blue", lw=1.2, label="approach of v_h (bounds' field)" if eq
+            else "approach (relative displacement)")
+    ax.plot(x[act], np.full(int(act.sum()), 0.04), "^", color="tab:red", ms=4, transform=ax.get_xaxis_transform(),
+            label="active pairs (contact force > 0)", gid="active pairs", clip_on=False)
+    _y_range(ax, np.r_[gap, rel], 0.3, float(np.abs(sol.displacement).max()), below=0.15)
+    ax.set(xlim=xlim, xlabel=f"x [{L}]", ylabel=f"normal gap and approach [{L}]")
+    ax.set_title("gap and approach at the contact pairs", pad=14)  # above a "1e-6" of the y axis
     ax.legend(fontsize=7, loc="upper center", ncol=2)
     ax.grid(alpha=0.3)
     return ax
@@ -479,8 +184,8 @@ def plot_gap(sol, ax=None, xlim=None):
 
 def plot_pressure(sol, ax=None, xlim=None):
     """Contact pressure at the pairs in ``xlim`` (default: the contact zone widened by half its
-    width each side, :func:`contact_window`), with the closed form where the scene has one."""
-    ax = _axes(ax)
+    width each side, :func:`~cvxdual.outputs.views.contact_window`), with the closed form where the scene has one."""
+    ax = axes(ax)
     L, S = sol.scene.units
     c = sol.contact
     xlim = xlim or (contact_window(sol) or bodies_window(sol))[:2]
@@ -503,32 +208,66 @@ def plot_pressure(sol, ax=None, xlim=None):
     return ax
 
 
-def plot_bound_map(sol, ax=None, colorbar: bool = True, cax=None):
-    """Where the certified bound comes from: the contribution of every sub-triangle to ``G``
-    per unit area (``1/2 |sigma - C e(v)|_A^2``), log scale; the contact edges' total is in
-    the title."""
-    ax = _axes(ax)
-    L, S = sol.scene.units
+BOUND_SHARE = 1e-2  # the log colour range of the bound map starts where the densities below hold this share of G
+BOUND_DECADES = (2, 5)  # ... but spans this many decades at least and at most
+
+
+def bound_density(sol) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The certified bound's contributions over the bodies: triangles ``(n, 3, 2)`` (the
+    sub-triangles, then strips of the column slabs of curved pieces), the contribution to ``G``
+    per unit area on each [S] (``1/2 |sigma - C e(v)|_A^2``; a slab's spread over its strips) and
+    the contribution of each [S L^2]."""
     b = sol.bounds
     P = sol.space.sub_points()
-    d = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    area = 0.5 * np.abs(d[0][:, 0] * d[1][:, 1] - d[0][:, 1] * d[1][:, 0])
-    dens = b["contributions"]["sub"].ravel() / area
+    area = areas(P)
+    part = b["contributions"]["sub"].ravel()
+    dens = part / area
     if len(sol.space.pieces.slabs):  # the columns: each slab's share over its area
-        tris, slab, _ = _column_strips(sol)
+        tris, slab, _ = column_strips(sol)
+        strip = sizes(tris) ** 2
+        slab_dens = b["contributions"]["column"] / sol.space.pieces.slab_areas()
         P = np.concatenate([P, tris])
-        dens = np.concatenate([dens, (b["contributions"]["column"] / sol.space.pieces.slab_areas())[slab]])
-    floor = max(float(dens.max()) * 1e-8, 1e-300)
-    pc = ax.add_collection(Triangles(P, array=np.maximum(dens, floor), cmap="inferno",
-                                     norm=LogNorm(floor, max(float(dens.max()), 10 * floor))), autolim=False)
-    _outlines(ax, sol, colors="w", linewidths=0.5)
+        dens = np.concatenate([dens, slab_dens[slab]])
+        part = np.concatenate([part, slab_dens[slab] * strip])
+    return P, dens, part
+
+
+def bound_range(dens: np.ndarray, part: np.ndarray) -> tuple[float, float, float]:
+    """``(floor, top, share)``: the log colour range of :func:`plot_bound_map`, from the density
+    under which the pieces hold :data:`BOUND_SHARE` of the drawn ``G`` (within
+    :data:`BOUND_DECADES` of the largest) to the largest, and the share of the drawn ``G`` held
+    by the pieces above the floor."""
+    top = float(dens.max(initial=0.0))
+    if not top > 0:
+        return 0.1, 1.0, 1.0
+    order = np.argsort(dens)[::-1]
+    cum = np.cumsum(np.maximum(part[order], 0.0))
+    total = cum[-1] if len(cum) and cum[-1] > 0 else 1.0
+    cut = float(dens[order][min(int(np.searchsorted(cum, (1 - BOUND_SHARE) * total)), len(order) - 1)])
+    lo, hi = BOUND_DECADES
+    floor = min(max(cut, top * 10.0 ** -hi), top * 10.0 ** -lo)
+    share = float(np.maximum(part, 0.0)[dens >= floor].sum() / total)
+    return floor, top, share
+
+
+def plot_bound_map(sol, ax=None, colorbar: bool = True, cax=None):
+    """Where the certified bound comes from: the contribution of every sub-triangle to ``G``
+    per unit area (``1/2 |sigma - C e(v)|_A^2``), on a log scale over the decades that hold the
+    data (:func:`bound_range`; less is drawn in the darkest colour, the colour bar's arrow), and
+    ``G`` [S L^2, per unit thickness] in the title."""
+    ax = axes(ax)
+    L, S = sol.scene.units
+    P, dens, part = bound_density(sol)
+    floor, top, share = bound_range(dens, part)
+    pc = ax.add_collection(Triangles(P, array=np.maximum(dens, floor), cmap="inferno", norm=LogNorm(floor, top)),
+                           autolim=False)
+    outlines(ax, sol, colors="w", linewidths=0.5)
     x0, x1, y0, y1 = bodies_window(sol)
     ax.set(xlim=(x0, x1), ylim=(y0, y1), aspect="equal", xlabel=f"x [{L}]", ylabel=f"y [{L}]")
-    beyond = float(b["contributions"].get("continuation", np.zeros(0)).sum())
-    ax.set_title(f"G = {b['gap']:.3g} (contact edges {float(b['contributions']['contact'].sum()):.3g}"
-                 + (f", beyond the free arcs {beyond:.3g}" if beyond else "")
-                 + f"); bound sqrt(2G) = {b['error_bound']:.3g}", fontsize=9)
+    ax.set_title(f"G = {sol.bounds['gap']:.3g} {S}\u00b7{L}\u00b2", fontsize=10)
     if colorbar:
-        ax.figure.colorbar(pc, ax=None if cax is not None else ax, cax=cax,
-                           label=f"contribution to G per unit area [{S}]")
+        decades = np.log10(top / floor)
+        ax.figure.colorbar(pc, ax=None if cax is not None else ax, cax=cax, extend="min" if dens.min() < floor else
+                           "neither", label=f"contribution to G per unit area [{S}]\nlog, top {decades:.2g} decades: "
+                           f"{100 * share:.4g}% of the area's G")
     return ax
