@@ -156,6 +156,8 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
                 if e2.reason is None:  # not a solver's failure (memory, time): its own advice stands
                     both = f"{name} failed ({one_line(e.reason or e, 60)}), then {DEFAULT_SOLVER}: "
                     raise type(e2)(both + str(e2), cli=both + (e2.cli or str(e2))) from None
+                if e2.reason == e.reason:  # the same obstacle (the mesh's), with its own advice
+                    raise e2 from None
                 both = f"{name} failed ({one_line(e.reason or e, 60)}), then {one_line(e2.reason, 80)}"
                 raise type(e2)(f"{both}; try a lower level", cli=f"{both}; lower --level",
                                reason=both) from None

@@ -102,7 +102,10 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
             if solver != FAST:
                 solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
                                   "verbose": verbose, **solver_options}
-            sigma, g, stats = eq_stresses(space, solver, pairs, **solver_options)
+            try:
+                sigma, g, stats = eq_stresses(space, solver, pairs, **solver_options)
+            except SolverError as e:
+                raise sliver_error(space) or e from None
             p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
     t3 = time.perf_counter()
     with phase("recover", deadline) as p:
@@ -112,6 +115,28 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
     if check:
         check_solution(sol)
     return sol
+
+
+# (longest edge)^2 / area of a triangle past which the equilibrium space's local systems lose the
+# digits exactness needs: a column 1e-3 wide beside 1.25-high layers (2500) made the condensed system
+# indefinite (fast path) and Clarabel inaccurate; at 833 admissibility was 6e-10, at 250 1.7e-13
+SLIVER = 500.0
+
+
+def sliver_error(space: EquilibriumSpace) -> SolverError | None:
+    """Where the mesh holds a sliver (:data:`SLIVER`), the error that names it and its fix, for a
+    failed solve (a rounding failure, not the scene's: the P0 space solves such a mesh)."""
+    X = space.X
+    e2 = (np.diff(X, axis=1, append=X[:, :1]) ** 2).sum(2).max(1)
+    a = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+    ratio = e2 / np.maximum(0.5 * np.abs(a[0][:, 0] * a[1][:, 1] - a[0][:, 1] * a[1][:, 0]), 1e-300)
+    k = int(np.argmax(ratio))
+    if ratio[k] <= SLIVER:
+        return None
+    x, y = X[k].mean(0)
+    why = (f"eq space: a sliver at ({x:.4g}, {y:.4g}) (edge^2/area {ratio[k]:.2g}, over {SLIVER:g}): break points "
+           "in x (body ends, interval, focus) nearly coincide; make them equal or farther apart")
+    return SolverError(f"{why}, or use stress_space='p0'", cli=f"{why}, or drop --stress-space eq", reason=why)
 
 
 def error_summary(e: dict, bounds: dict) -> dict:

@@ -81,10 +81,27 @@ def _stretches(x0, x1, n0, focus, ratio, required):
     return brk, xib, counts, (xs, xi)
 
 
+# break points closer than this share of the scene's width, but not equal, are refused: a column
+# a few ulps wide (bodies' ends typed as 12.095145599881887 and ...889) cannot pair its nodes
+BREAK_RESOLUTION = 1e-9
+
+
 def _required(scene: Scene, extra) -> list:
     """The break points of the global columns: body ends, the contact interval's ends, the
-    focus ends and ``extra``."""
-    return [*(v for b in scene.bodies for v in b.x_range), *scene.contact, *(scene.mesh.focus or ()), *extra]
+    focus ends and ``extra``; two that differ by less than :data:`BREAK_RESOLUTION` of the
+    scene's width are refused, naming both."""
+    named = [*((v, f"the end of body {b.name!r}") for b in scene.bodies for v in b.x_range),
+             *((v, "the contact interval's end") for v in scene.contact),
+             *((v, "the focus's end") for v in (scene.mesh.focus or ())),
+             *((float(v), "a face's break or a boundary interval's end") for v in extra)]
+    x, first = np.unique(np.array([v for v, _ in named], float), return_index=True)  # each named where first met
+    x0, x1 = scene.x_extent
+    close = np.flatnonzero(np.diff(x) < BREAK_RESOLUTION * (x1 - x0))
+    if len(close):
+        (a, wa), (b, wb) = (named[first[close[0] + i]] for i in (0, 1))
+        raise MeshError(f"{wa} x = {a!r} and {wb} x = {b!r} are {b - a:.2g} apart: too close for two mesh "
+                        "columns; make them equal")
+    return [v for v, _ in named]
 
 
 def mesh_size(scene: Scene, level: int, extra=()) -> dict:

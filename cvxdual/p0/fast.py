@@ -228,12 +228,28 @@ class DisplacementSolver:
         """Keep the pairs with compressive force, add the penetrating ones; rounding-level forces
         and penetrations do not change the set (equivalent sets at a degenerate contact edge
         would otherwise alternate)."""
+        force, opening, tol_f, tol_o = self._violations(A, state)
+        return cover(np.where(A, force > -tol_f, opening < -tol_o), opening, self.jumps)
+
+    def one_change(self, A: np.ndarray, state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """:meth:`next_set` damped to one change, a cycle's way out: release the pair pulling
+        hardest or add the one penetrating deepest, whichever is larger against its own scale."""
+        force, opening, tol_f, tol_o = self._violations(A, state)
+        pull = np.where(A & (force < -tol_f), -force, 0.0) / max(float(np.abs(force).max(initial=0.0)), 1e-300)
+        depth = np.where(~A & (opening < -tol_o), -opening, 0.0) / max(float(np.abs(opening).max(initial=0.0)), 1e-300)
+        keep = A.copy()
+        if max(pull.max(initial=0.0), depth.max(initial=0.0)) > 0:
+            k = int(np.argmax(pull)) if pull.max() >= depth.max() else int(np.argmax(depth))
+            keep[k] = not A[k]
+        return cover(keep, opening, self.jumps)
+
+    def _violations(self, A: np.ndarray, state: tuple[np.ndarray, np.ndarray]) -> tuple:
+        """Forces of the active pairs, openings of all, and the rounding levels that do not count."""
         s = self.system
         r, res = state
         force = np.where(A, res[s.jb], 0.0)
         opening = s.eps - (r[s.jb] - r[s.ja])
-        keep = np.where(A, force > -1e-12 * self.fscale, opening < -1e-12 * s.scales.displacement)
-        return cover(keep, opening, self.jumps)
+        return force, opening, 1e-12 * self.fscale, 1e-12 * s.scales.displacement
 
     def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(r, active)``: free displacements and the converged active set, from ``active`` (or
