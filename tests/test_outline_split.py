@@ -10,6 +10,7 @@ import copy
 import math
 import time
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,50 +20,20 @@ from cvxdual.geometry.mesh import build_mesh, column_abscissae
 from cvxdual.geometry.triangles import doubled_areas
 from cvxdual.scene.scenefile import scene_from_dict
 
-# a punch with rounded corners (a composite face) on a block with a hole, its bottom split in two
-# halves at x = 0 under the punch's centre, each half on rollers
-PUNCH_ON_BLOCK = """
-name = "punch-on-split-block"
-units = ["mm", "MPa"]
-[mesh]
-columns = 8
-[bodies.punch]
-position = "upper"
-x = [-9.0, 9.0]
-face = { kind = "composite", start = [-9.0, 2.683375209644599], pieces = [
-    { to = [-4.0, 0.0], center = [-4.0, 6.0] }, { to = [4.0, 0.0] },
-    { to = [9.0, 2.683375209644599], center = [4.0, 6.0] } ] }
-material = { E = 210000.0, nu = 0.3 }
-outline = [
-  { name = "fr", to = [10.0, 6.0], center = [4.0, 6.0] },
-  { name = "right", to = [10.0, 20.0] },
-  { name = "top", to = [-10.0, 20.0] },
-  { name = "left", to = [-10.0, 6.0] },
-  { name = "fl", to = [-9.0, 2.683375209644599], center = [-4.0, 6.0] },
-]
-[bodies.punch.boundary.press]
-on = "top"
-kind = "traction"
-traction = { value = [0.0, -200.0] }
-[bodies.block]
-position = "lower"
-x = [-30.0, 30.0]
-face = { kind = "flat", y0 = 0.0 }
-material = { E = 70000.0, nu = 0.33 }
-outline = [
-  { name = "right", to = [30.0, -25.0] },
-  { name = "bottom-right", to = [0.0, -25.0] },
-  { name = "bottom-left", to = [-30.0, -25.0] },
-  { name = "left", to = [-30.0, 0.0] },
-]
-holes = [{ name = "hole", center = [0.0, -12.0], radius = 2.0 }]
-[bodies.block.boundary.br]
-on = "bottom-right"
-kind = "sliding"
-[bodies.block.boundary.bl]
-on = "bottom-left"
-kind = "sliding"
-"""
+# examples/punch-on-block.toml (a punch with rounded corners on a block with a hole) with the block's
+# notch removed and its bottom split in two halves at x = 0 under the punch's centre, each on rollers
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "punch-on-block.toml"
+
+
+def part_dict() -> dict:
+    d = tomllib.loads(EXAMPLE.read_text())
+    d["name"] = "punch-on-split-block"
+    right, bottom_right, *_, bottom_left, left = d["bodies"]["block"]["outline"]
+    bottom_right["to"] = [0.0, -25.0]
+    d["bodies"]["block"]["outline"] = [right, bottom_right, bottom_left, left]
+    return d
+
+
 LOAD = 200.0 * 20.0  # the punch's top, 20 mm wide, pressed at 200 MPa: N/mm
 HOLE_R = 2.0
 
@@ -71,7 +42,7 @@ def punch_on_block(split: float = 0.0, hole: bool = True, columns: int = 8, flat
                    top_split: float | None = None):
     """The scene above, its block's bottom split at ``split``; ``flat_punch``: a flat punch 24 mm
     wide instead (an outline body, its top split at ``top_split`` if given)."""
-    d = tomllib.loads(PUNCH_ON_BLOCK)
+    d = part_dict()
     d["mesh"]["columns"] = columns
     d["bodies"]["block"]["outline"][1]["to"] = [split, -25.0]
     if not hole:
@@ -165,7 +136,7 @@ def test_split_scene_solves_as_the_whole_one_does():
     """A split changes nothing of the body: with the same sliding support on both halves, the
     solution is the unsplit block's (same mesh but the cut positions, so to the discretisation:
     the objective agrees to 2 % at level 1, the force exactly)."""
-    d = tomllib.loads(PUNCH_ON_BLOCK)
+    d = part_dict()
     whole = copy.deepcopy(d)
     b = whole["bodies"]["block"]
     b["outline"] = [b["outline"][0], {"name": "bottom", "to": [-30.0, -25.0]}, b["outline"][3]]
