@@ -9,12 +9,11 @@ from __future__ import annotations
 import copy
 import math
 import shutil
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
-from test_outline_split import PUNCH_ON_BLOCK  # a punch with a composite face on a block
+from test_outline_split import part_dict  # a punch with a composite face on a block
 
 import cvxdual
 from cvxdual.errors import SceneError
@@ -148,13 +147,13 @@ Point(7) = {10, 6, 0}; Point(8) = {10, 20, 0}; Point(9) = {-10, 20, 0}; Point(10
 Circle(1) = {1, 5, 2}; Line(2) = {2, 3}; Circle(3) = {3, 6, 4};
 Circle(4) = {4, 6, 7}; Line(5) = {7, 8}; Line(6) = {8, 9}; Line(7) = {9, 10}; Circle(8) = {10, 5, 1};
 Physical Curve("face") = {3, 1, 2};  // in any order: chained from the left end
-Physical Curve("fr") = {4}; Physical Curve("right") = {5}; Physical Curve("top") = {6};
-Physical Curve("left") = {7}; Physical Curve("fl") = {8};
+Physical Curve("corner-right") = {4}; Physical Curve("right") = {5}; Physical Curve("top") = {6};
+Physical Curve("left") = {7}; Physical Curve("corner-left") = {8};
 """
 
 
 def _punch_on_block() -> dict:
-    return tomllib.loads(PUNCH_ON_BLOCK)  # the scene file PUNCH_GEO's punch is drawn from
+    return part_dict()  # the scene file PUNCH_GEO's punch is drawn from
 
 
 def test_composite_face_twin(tmp_path, monkeypatch):
