@@ -145,6 +145,7 @@ def test_no_import_cycles():
     assert not cycles
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module, forbidden", [
     # the fast paths work on an assembled system or space only
     ("cvxdual.p0.fast", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation", "cvxdual.scene.scenefile",
@@ -258,6 +259,7 @@ def test_the_package_installs_nothing():
     assert [m for m, f in _modules().items() if pattern.search(f.read_text())] == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plots", [False, True])
 def test_fast_cli_run_imports_no_heavy_library_it_does_not_use(tmp_path, plots):
     """`cvxdual solve --solver fast` never loads CVXPY, pandas or Dask (0.3 s, 0.2 s and more of

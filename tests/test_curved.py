@@ -160,6 +160,7 @@ def test_too_coarse_for_curvature_is_a_clear_error():
     discretize(sc, "type1", 4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", ["cylinder-in-groove", "wavy"])
 def test_both_types_converge_together(scene):
     """Both triangulations solve at 5 levels (status optimal, residuals checked by solve), and

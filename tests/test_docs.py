@@ -258,6 +258,7 @@ def written_into_repo(work: Path, copied: set[str], since: float) -> list[str]:
     return sorted(bad)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (Path(sys.prefix) / "bin" / "activate").is_file(),
                     reason="the tests do not run in a virtual environment (no bin/activate in sys.prefix)")
 @pytest.mark.parametrize("page", PAGES)

@@ -55,6 +55,7 @@ def test_fast_route_agrees_with_cvxpy(scene, tri):
     assert a.bounds["energy_lower"] >= b.bounds["energy_lower"] - 1e-12 * abs(b.bounds["energy_lower"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", CURVED)
 def test_energy_brackets_share_a_point(scene):
     """Every bracket ``[-L(u0) - S(sigma_h), J(v_h)]`` contains ``J(u)``, so all of them (both

@@ -69,6 +69,7 @@ def test_local_dofs_match_the_vertex_map():
     assert np.array_equal(blocks, sp.basis)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,level", [("patch", 1), ("blocks", 0), ("blocks", 1), ("hertz", 0), ("hertz", 1),
                                          ("hertz", 2)])
 def test_agrees_with_cvxpy(scene, level):
@@ -83,6 +84,7 @@ def test_agrees_with_cvxpy(scene, level):
     assert np.array_equal(p < -1e-6 * np.abs(p).max(initial=0.0), info["active"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,tri", [("hertz", "type1"), ("cylinder-on-block", "type2"), ("wavy", "type1")])
 def test_closed_form_triangles_agree_with_their_kkt_systems(scene, tri):
     """The plain triangles' closed form (divergence eliminated through the reference element's
@@ -115,6 +117,7 @@ def test_nearly_incompressible_bodies_keep_the_patch_exact(nu):
     assert sol.error["l2_rel"] <= (1e-10 if nu < 0.49 else 1e-8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,tri", [("hertz", "type1"), ("blocks", "type1"), ("cylinder-in-groove", "type1"),
                                        ("cylinder-on-block", "type2")])
 def test_corrections_make_the_field_exact_without_a_projection(scene, tri):

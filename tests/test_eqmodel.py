@@ -54,6 +54,7 @@ def test_load_factor_scales_the_exact_field(model):
         model.solve()
 
 
+@pytest.mark.slow
 def test_a_cap_holds_everywhere_at_the_exact_field(model):
     """A convex cap at the vertices of a linear field caps the whole sub-triangle; after the
     exactness step the cap still holds to the user-constraint tolerance."""

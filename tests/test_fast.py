@@ -11,6 +11,7 @@ from cvxdual.p0.norms import l2_norm
 SCENES = ["patch", "hertz", "blocks", "cylinder-on-block", "cylinder-in-groove", "wavy"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("tri", ["type1", "type2"])
 @pytest.mark.parametrize("scene", SCENES)
 def test_fast_agrees_with_cvxpy(scene, tri):
@@ -26,6 +27,7 @@ def test_fast_agrees_with_cvxpy(scene, tri):
     assert b.solver["status"] == "optimal"
 
 
+@pytest.mark.slow
 def test_warm_start_needs_few_iterations():
     sc = cd.load_scene("hertz")
     cold = cd.solve(sc, level=4, solver="fast", warm_start=False)

@@ -100,6 +100,7 @@ def check_bracket(sol, exact: float) -> None:
     assert b["energy_lower"] - tol <= exact <= b["energy_upper"] + tol
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("space", ["p0", "eq"])
 def test_patch_without_symmetry_supports_is_exact_fast(space):
     scene = cd.load_scene(builtin_without_symmetry("patch"))
@@ -137,6 +138,7 @@ def test_block_with_hole_without_symmetry_supports():
 
 # -- a punch on a block that slides on its bottom -----------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("space", ["p0", "eq"])
 @pytest.mark.parametrize("solver", ["fast", "CLARABEL"])
 def test_floating_punch_carries_the_load(space, solver):
@@ -151,6 +153,7 @@ def test_floating_punch_carries_the_load(space, solver):
         assert sol.contact["x_max"] == pytest.approx(10.0, abs=1e-12 * 10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("example", ["punch-on-block", "punch-on-block-anchored"])
 def test_punch_on_block_part(example):
     """The part of issue 39 (a rounded punch on a block with a hole and a notch, no symmetry

@@ -89,6 +89,7 @@ def test_primal_stick_mask():
 
 # --- a. elastically similar bodies: friction does not matter as h -> 0 ------------------------------
 
+@pytest.mark.slow
 def test_similar_mirrored_meshes_give_no_slip_tendency():
     """With equal materials the built-in hertz meshes of the two bodies are exact mirror images
     (and so are their loads): the discrete slip tendency is exactly zero, Tresca changes nothing
@@ -103,6 +104,7 @@ def test_similar_mirrored_meshes_give_no_slip_tendency():
     assert tresca_vs_frictionless("mirrored", 4, tresca)[0] < 1e-2
 
 
+@pytest.mark.slow
 def test_similar_bodies_tresca_converges_to_frictionless():
     levels = [1, 2, 3, 4]
     diffs, systems = zip(*(tresca_vs_frictionless("similar", lv) for lv in levels), strict=True)

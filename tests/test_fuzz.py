@@ -82,6 +82,7 @@ def test_fuzz_findings(name, over, level, solver, stress_space):
 # (the fast path at level 1 has no warm start; levels 0-1 only: the fuzzing is about input, not
 # mesh size); derandomize and no database make every run draw the same cases, so CI is
 # deterministic and a failure reproduces with the drawn values that hypothesis prints
+@pytest.mark.slow
 @settings(max_examples=500, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(builtin_names()), st.integers(0, 2**32 - 1), st.sampled_from([0.0, 0.3, 1.0]),

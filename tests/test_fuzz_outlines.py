@@ -15,6 +15,7 @@ from cvxdual.geometry.mesh import build_mesh
 from cvxdual.scene.scenefile import builtin_data, load_scene, parse_assignment
 
 
+@pytest.mark.slow
 def test_smoke_run_has_no_findings():
     """40 cases (seeds drawn from 0, levels 0-1: the fuzzing is about the input, not the mesh
     size) in one worker process, 20-30 s on a 2-core machine; every case refused with a one-line

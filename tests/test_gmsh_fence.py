@@ -50,6 +50,7 @@ def children_of(pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 def test_the_caller_never_imports_gmsh_and_keeps_its_own_session(tmp_path):
     """A caller with a gmsh session of its own (a model named 'mine') meshes an outline body: gmsh
     runs in the child and the caller's model is still there. A caller without one never imports
@@ -69,6 +70,7 @@ def test_the_caller_never_imports_gmsh_and_keeps_its_own_session(tmp_path):
     assert list(home.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_killed_gmsh_is_one_error_and_the_next_mesh_is_right():
     """gmsh's process dies (SIGKILL, as the kernel's OOM killer or a segfault would end it) while it
     meshes: the caller gets one MeshError naming the signal, and the next mesh is the same as a

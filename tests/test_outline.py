@@ -88,6 +88,7 @@ def test_gmsh_time_is_reported_for_outline_scenes_only(patch_outline):
     assert "gmsh" not in cd.solve("patch", level=0, solver="fast").timings
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("scene", "level"), [("patch-outline", 4), ("block-with-hole", 3)])
 def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path, scene, level):
     """Same input, same mesh: in a fresh process, on one gmsh thread or two (each body is cut in
@@ -158,6 +159,7 @@ def _hoop(sol):
     return s[:2, 1], s[2:, 0]
 
 
+@pytest.mark.slow
 def test_kirsch_hole_hoop_stress_and_certified_bounds():
     """Kirsch: -3 q at the hole's sides, +q at its top and bottom (q = 100). The eq space at the
     finest level gets the sides within 2 % (the issue's acceptance; 1.1 % seen at level 3: 128
@@ -424,6 +426,7 @@ def test_set_changes_one_item_of_an_outline_list():
     assert "\n" not in str(e.value) and "numbered from 0" in str(e.value)
 
 
+@pytest.mark.slow
 def test_study_grid_over_an_outline(client, tmp_path):
     """A study's ``set`` grid over a number inside an outline list (here the hole's radius, by its
     index), as ``--set`` does: each case runs on its own mesh, both certified."""

@@ -92,6 +92,7 @@ def test_a_split_under_a_column_at_rounding_distance_meshes():
         check_split_block(build_mesh(sc, level), 0.0, hole=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("hole", [True, False], ids=["hole", "no-hole"])
 def test_split_at_every_column_meshes(hole):
     """The block's bottom split exactly at each level-0 column (a column at every level), and one
@@ -116,6 +117,7 @@ def test_split_at_every_column_meshes(hole):
                 assert a[-1] == b[0] and tuple(pts[a[-1]]) == (float(at), 20.0)
 
 
+@pytest.mark.slow
 def test_punch_on_split_block_levels_0_to_5():
     """The punch with rounded corners on the block with a hole, its bottom split at x = 0 (a column
     of every level, under the punch's centre): meshed at levels 0-5 (0.1-3 s a level, measured),

@@ -45,6 +45,7 @@ def refs(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_replaced_whole_no_stale_plots(tmp_path, refs):
     out = tmp_path / "o"
     written = write_outputs(solved(*A_ARGS), out)
@@ -60,6 +61,7 @@ def _half_then_fail(*args, **kwargs):
     raise OSError(errno.ENOSPC, "No space left on device")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", ["pathlib.Path.write_text", "numpy.savetxt", "meshio.write",
                                     "matplotlib.figure.Figure.savefig"],
                          ids=["summary.json", "contact.csv", "solution.vtu", "plots"])
@@ -94,6 +96,7 @@ def _no_exchange(monkeypatch):
     monkeypatch.setattr(files, "_RENAMEAT2", renameat2)
 
 
+@pytest.mark.slow
 def test_fallback_without_exchange(tmp_path, refs, monkeypatch):
     _no_exchange(monkeypatch)
     out = tmp_path / "o"
@@ -115,6 +118,7 @@ def test_fallback_without_exchange(tmp_path, refs, monkeypatch):
     assert content(out) == refs["B"] and os.listdir(tmp_path) == ["o"]
 
 
+@pytest.mark.slow
 def test_failure_after_the_swap_says_so(tmp_path, refs, monkeypatch):
     out = tmp_path / "o"
     write_outputs(solved(*A_ARGS), out)
@@ -136,6 +140,7 @@ def test_failure_after_the_swap_says_so(tmp_path, refs, monkeypatch):
     assert content(out) == refs["A"] and os.listdir(tmp_path) == ["o"]
 
 
+@pytest.mark.slow
 def test_leftovers_of_killed_runs_are_swept(tmp_path, refs):
     out = tmp_path / "o"
     write_outputs(solved(*A_ARGS), out)

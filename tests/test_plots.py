@@ -92,6 +92,7 @@ def _overlapping_ticks(fig) -> list[str]:
     return bad
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES)
 def test_every_axis_labelled_with_its_unit(case):
     sol, figs = solved(case)
@@ -305,6 +306,7 @@ def test_report_plots_have_units_and_no_overlapping_ticks():
         assert all(UNIT.search(ax.get_xlabel()) and UNIT.search(ax.get_ylabel()) for ax in fig.axes)
 
 
+@pytest.mark.slow
 def test_speed_plot_draws_memory_only_where_measured(tmp_path):
     from run_study import SPECS  # studies/, on the path by conftest.py
 
@@ -333,6 +335,7 @@ def _field(ax) -> Triangles:
     return coll
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["hole", "hole-eq", "patch-1", "patch-eq"])
 def test_every_named_figure_is_written(case, tmp_path):
     """``plots="all"`` writes every figure (bounds.png where there are bounds), each a PNG; a
@@ -430,6 +433,7 @@ def test_deformed_marks_exactly_the_active_pairs_off_the_curves(case):
     assert marks.get_transform() == ax.get_xaxis_transform() and max(marks.get_ydata()) < lowest
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", sorted(__import__("cvxdual.scene.scenefile", fromlist=["x"]).builtin_scenes()))
 def test_bounds_title_inside_the_figure_on_every_builtin_scene(scene):
     """bounds.png names the scene and level and gives G in the scene's energy units (S L^2 per

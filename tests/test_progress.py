@@ -37,6 +37,7 @@ def recorder():
     log.setLevel(saved)
 
 
+@pytest.mark.slow
 def test_level5_solve_reports_each_phase_as_it_ends(tmp_path, capsys, recorder):
     """The acceptance: a level-5 solve prints a line per phase, each when that phase ends (the
     solve's line comes after its start line by the solve's own time, not at the end of the run)."""
@@ -124,6 +125,7 @@ def test_alarm_is_disarmed_after_every_run():
     assert _alarm_state() == clean
 
 
+@pytest.mark.slow
 def test_time_limit_in_another_thread_is_a_time_limit_error():
     """No alarm outside the main thread: the deadline is checked as phases end and Clarabel gets
     what is left (after CVXPY's compile), and its time-out is reported as the run's time limit,
@@ -191,6 +193,7 @@ def _run_cli(args, cwd, code=None, timeout=120):
     return p, time.perf_counter() - t0
 
 
+@pytest.mark.slow
 def test_cli_time_limit_on_level6_cvxpy_solve(tmp_path):
     """The acceptance: --time-limit 1 on a level-6 CVXPY solve stops within a few seconds (the
     run itself takes over a minute here) with one error line, writing nothing."""
@@ -202,6 +205,7 @@ def test_cli_time_limit_on_level6_cvxpy_solve(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_cli_hard_stop_ends_a_solver_that_cannot_be_interrupted(tmp_path):
     """A phase that ignores the alarm (here: SIGALRM blocked, as compiled code that never returns
     to Python effectively does) is ended by the CLI's timer 1 s after the limit, with one line."""

@@ -96,6 +96,7 @@ def test_composite_refusals():
         Composite(((0.0, -1.0), (2.0, 1.0)), ((1.0, 0.0),))
 
 
+@pytest.mark.slow
 def test_rounded_punch_linear_against_the_closed_form():
     """The contact half-width within one face spacing of the closed form, and the pressure's
     relative L2 error (trapezoid over the pairs) falling with h (0.076, 0.030, 0.012 measured)."""
@@ -128,6 +129,7 @@ def _half_width(sol):
     return x[i], x[i + 1] - x[i]
 
 
+@pytest.mark.slow
 def test_rounded_punch_true_geometry_converges_to_one_half_width():
     """No closed form: P0 and eq, both triangulations, reach one contact half-width (the finest
     level's within one face spacing of each other, past the flat b = 3 and near the linearised

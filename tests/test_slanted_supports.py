@@ -231,6 +231,7 @@ def test_p0_matches_a_kkt_solve_with_the_support_rows(scenes, name):
     assert np.all(jump[~active] <= s.eps[~active] + 1e-9 * np.abs(s.eps).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "rate_min"), [("wedge", 0.8), ("guided", 0.45)])
 def test_wedge_bracket_is_certified_and_closes(scenes, name, rate_min):
     """The equilibrium stress (traction 0 along the slopes or the guides, free across) against

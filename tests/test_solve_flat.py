@@ -48,6 +48,7 @@ def test_hertz_error_decreases_with_rate():
     assert rate >= 0.5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene,level", [("hertz", 1), ("hertz", 2), ("hertz", 3),
                                          ("blocks", 1), ("blocks", 2), ("blocks", 3)])
 def test_dual_and_primal_agree(scene, level):

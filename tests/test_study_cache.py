@@ -584,6 +584,7 @@ def _loads(cache: Path, df: pd.DataFrame) -> None:
     assert load_reference_info(store, info.stem, ref) is not None
 
 
+@pytest.mark.slow
 def test_rerun_after_corrupting_every_file(client, first, tmp_path):
     """Every cache file broken (three rounds, each file a different way each round): the rerun
     recomputes every entry, with the same figures; the workers' in-memory reference (the last

@@ -66,6 +66,7 @@ def _figures(df: pd.DataFrame) -> pd.DataFrame:
     return df.sort_values(ORDER)[ORDER + FIGURES].reset_index(drop=True)
 
 
+@pytest.mark.slow
 def test_local_cluster(clean_run, client):
     d, spec, df = clean_run
     assert len(df) == 2 * 4 * 2 and set(REQUIRED) <= set(df.columns)
@@ -125,6 +126,7 @@ def scheduler(tmp_path):
             p.wait()
 
 
+@pytest.mark.slow
 def test_separate_scheduler_two_workers(scheduler, clean_run, tmp_path, capsys):
     spec = _write_spec(tmp_path)
     out = tmp_path / "out"
@@ -146,6 +148,7 @@ def measure(case, solution):
 """
 
 
+@pytest.mark.slow
 def test_resume_after_kill(client, clean_run, tmp_path):
     (tmp_path / "slow.py").write_text(SLOW)
     spec = _write_spec(tmp_path, 'hooks = "slow.py"\n')
@@ -185,6 +188,7 @@ def measure(case, solution):
 """
 
 
+@pytest.mark.slow
 def test_finer_reference_compare_and_failures(client, tmp_path):
     """A finer-level reference, two paths compared, a solver failure and an out-of-memory case:
     every case is a row, failures say why."""

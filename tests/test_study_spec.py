@@ -99,6 +99,7 @@ def test_cache_rejects_tampered_entries(tmp_path):
 
 
 
+@pytest.mark.slow
 def test_stability_quick(client, tmp_path):
     df = run(SPECS / "stability.py", tmp_path, quick=True, client=client, cache=None, quiet=True)
     assert set(df.solver) == {"CLARABEL", "fast"} and set(df.triangulation) == {"type1", "type2"}
@@ -113,6 +114,7 @@ def test_stability_quick(client, tmp_path):
     assert "## What the table says" in text and "## stiffness contrast" in text
 
 
+@pytest.mark.slow
 def test_convergence_spec_small(client, tmp_path):
     """The convergence spec (its hooks and report) on a subset: hertz against the exact field, the
     groove's P0 and eq rows against a finer equilibrium reference."""
@@ -160,6 +162,7 @@ def test_speed_limit_rows(client, tmp_path):
     assert df.loc["limit", "n_pieces"] == df.loc["fast", "n_pieces"]
 
 
+@pytest.mark.slow
 def test_bounds_spec_small(client, tmp_path):
     """The bounds spec on hertz level 1 at two Poisson ratios: eq beats p0, the bound dominates the
     true error, and eq does not lock."""
