@@ -31,7 +31,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..errors import MeshError, SolverError
-from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active
+from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active, worst_flipped
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
 from .balance import PROJECT_TOL, make_exact, rigid_motions
@@ -539,12 +539,8 @@ class HybridSolver:
         most penetrating one, whichever violates more against its own scale (a cycle's way out)."""
         p, nu = state["p"], state["nu"]
         tol_p, tol_nu = self._set_tolerances(p, nu)
-        tension = np.where(A & (p > tol_p), p / max(float(np.abs(p).max(initial=0.0)), 1e-300), 0.0)
-        depth = np.where(~A & (nu < -tol_nu), -nu / max(float(np.abs(nu).max(initial=0.0)), 1e-300), 0.0)
-        keep = A.copy()
-        if max(tension.max(initial=0.0), depth.max(initial=0.0)) > 0:
-            k = int(np.argmax(tension)) if tension.max() >= depth.max() else int(np.argmax(depth))
-            keep[k] = not A[k]
+        sp, snu = (max(float(np.abs(v).max(initial=0.0)), 1e-300) for v in (p, nu))
+        keep = worst_flipped(A, np.where(p > tol_p, p / sp, 0.0), np.where(nu < -tol_nu, -nu / snu, 0.0))
         return cover(keep, np.where(A, np.inf, nu), self.jumps)
 
     def run(self, active: np.ndarray | None = None) -> dict:

@@ -95,6 +95,19 @@ def iterate(solver: ActiveSetSolver, A: np.ndarray) -> tuple[np.ndarray, object]
     raise _stuck(solver, f"no convergence in {MAX_ITER} active-set iterations")
 
 
+def worst_flipped(A: np.ndarray, release: np.ndarray, add: np.ndarray) -> np.ndarray:
+    """``A`` with one unknown changed: the active one with the largest ``release`` violation (a
+    pull) or the inactive one with the largest ``add`` violation (a penetration), whichever is
+    larger (both relative to their fields' scales, as the caller gives them); ``A`` itself if
+    neither is positive. The damped step of a ``one_change`` (see :func:`iterate`)."""
+    r, a = np.where(A, np.maximum(release, 0.0), 0.0), np.where(~A, np.maximum(add, 0.0), 0.0)
+    out = A.copy()
+    if max(r.max(initial=0.0), a.max(initial=0.0)) > 0:
+        k = int(np.argmax(r)) if r.max() >= a.max() else int(np.argmax(a))
+        out[k] = not A[k]
+    return out
+
+
 def cover(A: np.ndarray, closeness: np.ndarray, jumps: np.ndarray) -> np.ndarray:
     """``A`` plus, if needed, the closest unknowns (smallest ``closeness``) that stop every motion
     separating the bodies. ``jumps (n, m)``: the relative normal motion at each contact unknown

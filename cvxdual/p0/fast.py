@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SolverError
-from ..fast.core import ActiveSetStats, cover, iterate
+from ..fast.core import ActiveSetStats, cover, iterate, worst_flipped
 from ..linalg.factor import SPDFactor, backends, one_blas_thread, start_up
 from ..linalg.sparse import assemble_lower
 from ..solution import SolverStats
@@ -235,12 +235,9 @@ class DisplacementSolver:
         """:meth:`next_set` damped to one change, a cycle's way out: release the pair pulling
         hardest or add the one penetrating deepest, whichever is larger against its own scale."""
         force, opening, tol_f, tol_o = self._violations(A, state)
-        pull = np.where(A & (force < -tol_f), -force, 0.0) / max(float(np.abs(force).max(initial=0.0)), 1e-300)
-        depth = np.where(~A & (opening < -tol_o), -opening, 0.0) / max(float(np.abs(opening).max(initial=0.0)), 1e-300)
-        keep = A.copy()
-        if max(pull.max(initial=0.0), depth.max(initial=0.0)) > 0:
-            k = int(np.argmax(pull)) if pull.max() >= depth.max() else int(np.argmax(depth))
-            keep[k] = not A[k]
+        sf, so = (max(float(np.abs(v).max(initial=0.0)), 1e-300) for v in (force, opening))
+        keep = worst_flipped(A, np.where(force < -tol_f, -force / sf, 0.0),
+                             np.where(opening < -tol_o, -opening / so, 0.0))
         return cover(keep, opening, self.jumps)
 
     def _violations(self, A: np.ndarray, state: tuple[np.ndarray, np.ndarray]) -> tuple:
