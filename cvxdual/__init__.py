@@ -33,7 +33,6 @@ from .errors import (
 )
 from .geometry import build_mesh, discretize
 from .outputs import write_outputs
-from .p0 import System, assemble
 from .pipeline import build_model, build_system, solve
 from .reference import HertzData, exact_field, exact_reference, hertz_line_contact, hertz_pressure, mcewen_stress
 from .scene import (
@@ -50,6 +49,7 @@ from .scene import (
     parse_assignment,
 )
 from .solution import Solution, SolverStats
+from .system import System, assemble
 
 try:  # the installed distribution's version: pyproject.toml is its one source
     __version__ = _version("cvxdual")
@@ -57,7 +57,7 @@ except PackageNotFoundError:  # a source tree that was never installed
     __version__ = "unknown (not installed)"
 
 # the CVXPY models load CVXPY (0.3 s): on first use, so that the fast path never pays for it
-_LAZY = {"DualModel": ".p0.dual", "EquilibriumModel": ".eq.model", "PrimalModel": ".p0.primal"}
+_LAZY = {"DualModel": ".p0.dual", "EquilibriumModel": ".eq.model", "PrimalModel": ".system.primal"}
 
 
 def __getattr__(name):

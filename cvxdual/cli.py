@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .convex.solvers import LARGE_QP
 from .errors import CvxdualError
-from .model.solvers import LARGE_QP
 from .progress import check_time_limit, log, phase
 from .validate import one_line
 
@@ -92,9 +92,9 @@ def _cmd_scenes(args) -> int:
 
 
 def _cmd_solve(args) -> int:
+    from .convex.solvers import resolve_solver
     from .files import sweep_leftovers
     from .geometry.triangulation import check_triangulation
-    from .model.solvers import resolve_solver
     from .outputs.figures import Plot, names_plot, parse_plots
     from .outputs.output_set import check_output_dir, write_outputs
     from .pipeline import solve

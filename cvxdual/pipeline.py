@@ -14,17 +14,17 @@ from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
+from .convex.solvers import DEFAULT_SOLVER, FAST, default_solver, resolve_solver
 from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
 from .geometry.mesh import check_level, mesh_size
 from .geometry.outline_mesh import gmsh_seconds
 from .geometry.triangulation import check_triangulation, discretize
-from .model.solvers import DEFAULT_SOLVER, FAST, default_solver, resolve_solver
-from .p0.assembly import System, assemble
 from .p0.run import dual_model, solve_p0  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
 from .progress import Deadline, phase
 from .scene import Scene
 from .sizing import check_size
 from .solution import Solution
+from .system.assembly import System, assemble
 from .validate import one_line, short
 
 log = logging.getLogger(__name__)
@@ -50,7 +50,7 @@ def as_scene(scene) -> Scene:
 
 
 def build_system(scene, triangulation: str = "type1", level: int | None = None) -> System:
-    """Mesh and assemble ``scene``: the :class:`~cvxdual.p0.assembly.System` of the discrete problem."""
+    """Mesh and assemble ``scene``: the :class:`~cvxdual.system.assembly.System` of the discrete problem."""
     scene = as_scene(scene)
     return assemble(*discretize(scene, check_triangulation(triangulation), level))
 
@@ -80,10 +80,10 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
           **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
-    ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.fast`
+    ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.activeset`
     (warm-started from level ``level - 2`` unless ``warm_start`` is false). By default (no
     solver and no options) the CVXPY solver measured fastest at the mesh's size
-    (:func:`cvxdual.model.solvers.default_solver`: Clarabel, SCS from 2e4 pieces; for
+    (:func:`cvxdual.convex.solvers.default_solver`: Clarabel, SCS from 2e4 pieces; for
     ``stress_space="eq"`` the fast route), handing over to Clarabel where it fails; options alone
     go to Clarabel.
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium

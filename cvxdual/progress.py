@@ -1,7 +1,7 @@
 """Progress of a run and its time limit.
 
 Progress is reported through :mod:`logging`: the logger ``"cvxdual"`` (and its children, e.g.
-``"cvxdual.p0.fast"``) writes one INFO record as each phase ends (mesh, assemble, build, solve,
+``"cvxdual.system.displacement"``) writes one INFO record as each phase ends (mesh, assemble, build, solve,
 recover, write) and one as a long phase starts; DEBUG records follow the fast path's
 iterations. A library stays silent unless its caller configures logging
 (``logging.basicConfig(level=logging.INFO)``); the CLI prints the records on stderr.

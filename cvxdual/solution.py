@@ -19,8 +19,8 @@ import numpy as np
 from .errors import AccuracyError
 
 if TYPE_CHECKING:  # annotations only: a solution holds the objects of the layers that built it
-    from .p0.assembly import System
     from .scene import Scene
+    from .system.assembly import System
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
@@ -55,11 +55,11 @@ class SolverStats(Mapping):
     iterations: int | None = None
     solve_time: float | None = None  # wall time of the solve (fast path: its warm start included)
     fallback: str | None = None  # why another solver solved instead, if one did
-    # -- the CVXPY path (cvxdual.model.solvers.solve_problem) --
+    # -- the CVXPY path (cvxdual.convex.solvers.solve_problem) --
     compile_time: float | None = None  # CVXPY's canonicalisation, inside the solve call
     solver_time: float | None = None  # the solver's own clock
     setup_time: float | None = None  # the solver's set-up (CVXPY), the local blocks (eq fast path)
-    # -- the fast paths (cvxdual.fast) --
+    # -- the fast paths (cvxdual.activeset) --
     backend: str | None = None  # factorisation backend of the last factorisation
     factorizations: int | None = None
     factor_time: float | None = None
@@ -264,3 +264,9 @@ def check_solution(sol: Solution) -> None:
                    "cli": "try --solver CLARABEL (interior point) or --solver fast"})
         what = f"solver {name} returned 'optimal' but the solution fails the accuracy checks ({txt})"
         raise AccuracyError(f"{what}; {advice['api']}", cli=f"{what}; {advice['cli']}")
+
+
+def skipped_error(residuals: dict, why: str | None) -> dict | None:
+    """A solution's ``checks`` when the scene's exact field does not solve it (``why``): every
+    residual applied, the error skipped with the reason; ``None`` (all applied) otherwise."""
+    return None if why is None else {"applied": dict(residuals), "skipped": {"error": why}}

@@ -15,20 +15,20 @@ PKG = ROOT / "cvxdual"
 
 # Layers, lowest first. A unit (a subpackage, or a top-level module) may import units of lower
 # layers and its own modules, never a unit of its own layer or above. This is the data flow:
-# scene -> reference -> geometry -> linalg -> solution -> model/fast -> p0 -> eq -> pipeline ->
-# outputs -> study -> cli.
+# scene -> reference -> geometry -> linalg -> solution -> convex/activeset -> system -> p0 | eq ->
+# pipeline -> outputs -> study -> cli. The two stress spaces share one layer: neither imports the other.
 LAYERS = [
     {"errors"},
     {"validate", "voigt"},
     {"files", "progress", "memory"},
     {"scene"},  # what the user describes
     {"reference"},  # closed forms a scene may declare
-    {"geometry"},  # meshes, pieces, loads, rigid motions
+    {"geometry"},  # meshes and pieces
     {"linalg", "sizing"},
     {"solution"},  # the result type and tolerances of both stress spaces
-    {"model", "fast"},  # the CVXPY layer and the active-set core, over no stress space
-    {"p0"},  # the paper's stress space: assembly, model, fast solver, run
-    {"eq"},  # the equilibrium space, built on the P0 mesh and displacement
+    {"convex", "activeset"},  # the CVXPY layer and the active-set core, over no stress space
+    {"system"},  # the discrete system both spaces share: supports, loads, rigid motions, assembly, P1 displacement
+    {"p0", "eq"},  # the two stress spaces, siblings: the paper's P0 and the equilibrium space
     {"pipeline"},  # the entry points
     {"outputs"},
     {"study"},
@@ -113,13 +113,19 @@ def test_layers_import_only_lower_layers():
 
 
 def test_the_layering_test_catches_an_upward_import():
-    """The check itself: a geometry module importing the pipeline, or two units of one layer
-    importing each other, is a violation."""
+    """The check itself: a geometry module importing the pipeline, two units of one layer importing
+    each other, one stress space importing the other, or the shared system importing a space, is a
+    violation."""
     graph, _ = _graph()
-    graph = {**graph, "cvxdual.geometry.mesh": graph["cvxdual.geometry.mesh"] + [("cvxdual.pipeline", ["solve"])],
-             "cvxdual.fast.core": graph["cvxdual.fast.core"] + [("cvxdual.model.base", [])]}
-    assert layering_violations(graph) == ["cvxdual.fast.core -> cvxdual.model.base",
-                                          "cvxdual.geometry.mesh -> cvxdual.pipeline"]
+    extra = {"cvxdual.geometry.mesh": ("cvxdual.pipeline", ["solve"]),
+             "cvxdual.activeset.core": ("cvxdual.convex.base", []),
+             "cvxdual.eq.run": ("cvxdual.p0.run", ["solve_p0"]),
+             "cvxdual.system.assembly": ("cvxdual.eq.space", ["EquilibriumSpace"])}
+    graph = {**graph, **{m: graph[m] + [imp] for m, imp in extra.items()}}
+    assert layering_violations(graph) == ["cvxdual.activeset.core -> cvxdual.convex.base",
+                                          "cvxdual.eq.run -> cvxdual.p0.run",
+                                          "cvxdual.geometry.mesh -> cvxdual.pipeline",
+                                          "cvxdual.system.assembly -> cvxdual.eq.space"]
 
 
 def test_no_import_cycles():
@@ -148,9 +154,9 @@ def test_no_import_cycles():
 @pytest.mark.slow
 @pytest.mark.parametrize("module, forbidden", [
     # the fast paths work on an assembled system or space only
-    ("cvxdual.p0.fast", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation", "cvxdual.scene.scenefile",
-                         "cvxdual.p0.dual"}),
-    ("cvxdual.p0.assembly", {"cvxdual.p0.dual", "cvxdual.p0.fast", "cvxdual.p0.run"}),
+    ("cvxdual.system.displacement", {"cvxdual.geometry.mesh", "cvxdual.geometry.triangulation",
+                                     "cvxdual.scene.scenefile", "cvxdual.p0.dual"}),
+    ("cvxdual.system.assembly", {"cvxdual.p0.dual", "cvxdual.system.displacement", "cvxdual.p0.run"}),
     # the drawing modules draw on an ax (the files are the output set's, which imports them through
     # figures), each on those before it only: render <- views <- maps <- plots
     *((f"cvxdual.outputs.{m}", {f"cvxdual.outputs.{n}" for n in ("output_set", *above)})
@@ -241,14 +247,14 @@ def test_all_names_exist():
 
 
 def test_active_set_iteration_lives_in_the_core():
-    """Both fast solvers iterate with :func:`cvxdual.fast.core.iterate` and complete their sets
+    """Both fast solvers iterate with :func:`cvxdual.activeset.core.iterate` and complete their sets
     with its ``cover``; no other module has an iteration limit or a cycle test of its own."""
     src = {m: f.read_text() for m, f in _modules().items()}
-    for m in ("cvxdual.p0.fast", "cvxdual.eq.fast"):
-        assert re.search(r"from \.\.fast\.core import .*\biterate\b", src[m]) and "iterate(self" in src[m], m
-        assert re.search(r"from \.\.fast\.core import .*\bcover\b", src[m]), m
+    for m in ("cvxdual.system.displacement", "cvxdual.eq.active_set"):
+        assert re.search(r"from \.\.activeset\.core import .*\biterate\b", src[m]) and "iterate(self" in src[m], m
+        assert re.search(r"from \.\.activeset\.core import .*\bcover\b", src[m]), m
     marks = re.compile(r"MAX_ITER\s*=|\bseen\.add\(|active set cycles|tobytes\(\) in seen")
-    assert sorted(m for m, s in src.items() if marks.search(s)) == ["cvxdual.fast.core"]
+    assert sorted(m for m, s in src.items() if marks.search(s)) == ["cvxdual.activeset.core"]
 
 
 def test_the_package_installs_nothing():

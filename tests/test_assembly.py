@@ -3,7 +3,7 @@ import pytest
 
 import cvxdual as cd
 from cvxdual.geometry.triangulation import discretize
-from cvxdual.p0.assembly import assemble
+from cvxdual.system.assembly import assemble
 
 
 def _system(name, level=1, tri="type1"):
@@ -93,7 +93,7 @@ def test_separation_work_of_one_motion_matches_the_lp():
     zeros and mixed rows: admissible on one side, both or neither)."""
     from scipy.optimize import linprog
 
-    from cvxdual.geometry.rigid import separation_work
+    from cvxdual.system.rigid import separation_work
     rng = np.random.default_rng(3)
     for _ in range(200):
         n = rng.integers(1, 6)
@@ -111,7 +111,7 @@ def test_anchor_pivots_match_pivoted_qr():
     """The anchors' column choice equals LAPACK's column-pivoted QR (the choice it replaces)."""
     import scipy.linalg as sla
 
-    from cvxdual.geometry.rigid import pivot_columns
+    from cvxdual.system.rigid import pivot_columns
     rng = np.random.default_rng(5)
     for m in (1, 2, 3):
         A = rng.normal(size=(m, 200)) * rng.uniform(0.1, 10, size=200)

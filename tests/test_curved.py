@@ -5,11 +5,11 @@ import pytest
 from helpers import contains
 
 import cvxdual as cd
-from cvxdual.geometry.boundary import side_quadrature
 from cvxdual.geometry.locate import locate
 from cvxdual.geometry.triangulation import discretize, stretches
-from cvxdual.p0.assembly import assemble
 from cvxdual.scene import BoundaryPart, Traction
+from cvxdual.system.assembly import assemble
+from cvxdual.system.boundary import side_quadrature
 
 CURVED = ["cylinder-on-block", "cylinder-in-groove", "wavy"]
 CASES = [(s, t, L) for s in CURVED for t in ("type1", "type2") for L in (0, 1, 2)]

@@ -1,4 +1,4 @@
-"""CVXPY's internal calls that cvxdual makes (cvxdual/model/cvxpy_internals.py, the load sweep's
+"""CVXPY's internal calls that cvxdual makes (cvxdual/convex/cvxpy_internals.py, the load sweep's
 cached re-solve): each must exist and behave as used. When a CVXPY release changes one of them,
 this file fails first, naming the call, before any solve goes wrong."""
 
@@ -6,7 +6,7 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from cvxdual.model import cvxpy_internals as internals
+from cvxdual.convex import cvxpy_internals as internals
 
 
 def _problem():

@@ -1,4 +1,4 @@
-"""The fast path of the equilibrium dual (cvxdual/eq/fast.py, docs/equilibrium.md section 10):
+"""The fast path of the equilibrium dual (cvxdual/eq/active_set.py, docs/equilibrium.md section 10):
 the same solution as the CVXPY path, exact after the post-step, KKT conditions, warm and
 cold starts, a clear error when the contact set cycles."""
 
@@ -12,13 +12,13 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 import cvxdual as cd
-from cvxdual.eq.balance import PROJECT_TOL
-from cvxdual.eq.bounds import admissibility_residuals
-from cvxdual.eq.fast import (
+from cvxdual.eq.active_set import (
     HybridSolver,
     active_from_pairs,
     solve_eq_fast,
 )
+from cvxdual.eq.balance import PROJECT_TOL
+from cvxdual.eq.bounds import admissibility_residuals
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.errors import SolverError
@@ -107,7 +107,7 @@ def test_nearly_incompressible_bodies_keep_the_patch_exact(nu):
     """The patch test's uniform stress at nu = 0.4999 as well as at 0.3: a nearly incompressible
     body's triangles leave the closed form (which loses a digit more: 4e-8 there) for their local
     KKT systems; the two routes agree where both apply."""
-    from cvxdual.eq.fast import well_conditioned
+    from cvxdual.eq.active_set import well_conditioned
     scene = cd.load_scene("patch", overrides=[{"bodies": {b: {"material": {"nu": nu}} for b in ("top", "bottom")}}])
     sol = cd.solve(scene, "type1", 3, "fast", stress_space="eq")
     sp = EquilibriumSpace.from_scene(scene, 1, "type1")

@@ -40,7 +40,7 @@ from cvxdual.eq.element import (
 )
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace
-from cvxdual.geometry.boundary import supports
+from cvxdual.system.boundary import supports
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision
 # times the O(10-100) terms of a row); 1e-12 leaves a margin of 10-100.

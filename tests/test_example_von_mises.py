@@ -11,8 +11,8 @@ import pytest
 from helpers import load_example
 
 import cvxdual
+from cvxdual.convex.base import USER_TOLERANCE
 from cvxdual.eq.bounds import ADMISSIBLE_TOL, admissibility_residuals
-from cvxdual.model.base import USER_TOLERANCE
 from cvxdual.reference.hertz import mcewen_stress
 from cvxdual.scene.materials import Material
 from cvxdual.scene.scenefile import builtin_data

@@ -82,7 +82,7 @@ def test_every_factorisation_backend_solves_the_stiffness():
     """The backends the fast path and the speed "limit" choose between solve an SPD stiffness
     for one and several right-hand sides; the limit reports the fastest of them."""
     from cvxdual.linalg.factor import LARGE_FROM, SPDFactor, backend, backends
-    from cvxdual.p0.fast import limit
+    from cvxdual.system.displacement import limit
     system = cd.build_system("hertz", "type1", 2)
     lim = limit(system)
     assert lim["backend"] in backends() and lim["t_limit"] == min(lim[f"t_limit_{b}"] for b in backends())

@@ -15,12 +15,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import cvxdual as cd
+from cvxdual.eq.active_set import solve_eq_fast
 from cvxdual.eq.balance import balance_contact
-from cvxdual.eq.fast import solve_eq_fast
 from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.errors import NoAdmissibleStressError, UnbalancedLoadError
-from cvxdual.geometry.boundary import load_vector
-from cvxdual.geometry.rigid import CARRIED, balance_correction
+from cvxdual.system.boundary import load_vector
+from cvxdual.system.rigid import CARRIED, balance_correction
 from cvxdual.validate import TINY
 
 # Total contact force against the applied load: the fast paths' forces are sums of O(n) terms

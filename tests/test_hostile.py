@@ -253,7 +253,7 @@ def test_default_solver_by_size_and_its_hand_over(monkeypatch):
     """Unnamed, the solver is chosen by the mesh's size (SCS from solvers.LARGE_QP pieces); it
     solves the same QP as Clarabel, and where it fails Clarabel takes over and says so. A named
     solver never hands over."""
-    import cvxdual.model.solvers as solvers
+    import cvxdual.convex.solvers as solvers
     ref = cd.solve("hertz", "type1", 1, "CLARABEL")
     assert cd.solve("hertz", "type1", 1).solver["solver"] == "CLARABEL"  # 576 pieces: below the switch
     monkeypatch.setattr(solvers, "LARGE_QP", 100)

@@ -18,11 +18,11 @@ from cvxdual.cli import main
 from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
 from cvxdual.geometry import gmsh_fence
-from cvxdual.geometry.boundary import supports
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
 from cvxdual.geometry.triangulation import discretize
 from cvxdual.scene import load_scene, parse_assignment
+from cvxdual.system.boundary import supports
 
 PATCH = """base = "patch"
 name = "patch-outline"

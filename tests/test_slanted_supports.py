@@ -15,11 +15,11 @@ import scipy.sparse.linalg as spla
 
 import cvxdual as cd
 from cvxdual.eq.fields import StressField
-from cvxdual.geometry.boundary import supports
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.triangulation import discretize
-from cvxdual.p0.assembly import assemble
 from cvxdual.scene import load_scene
+from cvxdual.system.assembly import assemble
+from cvxdual.system.boundary import supports
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,8 +10,8 @@ import pytest
 
 import cvxdual as cd
 import cvxdual.pipeline as pipeline
+from cvxdual.convex.solvers import FAST, solve_problem
 from cvxdual.errors import SolverError
-from cvxdual.model.solvers import FAST, solve_problem
 
 SHORT = 200  # characters: an error line a user reads at once (issue 39)
 

@@ -10,10 +10,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SolverError
-from ..geometry.boundary import supports
 from ..geometry.mesh import Mesh
-from ..geometry.rigid import balance_correction, candidates, carried_solve, check_balance
-from ..p0.assembly import Scales
+from ..system.assembly import Scales
+from ..system.boundary import supports
+from ..system.rigid import balance_correction, candidates, carried_solve, check_balance
 from .edges import outward_normals
 from .element import bary_gradients, traction_rows
 
@@ -28,7 +28,7 @@ def node_body(mesh: Mesh) -> np.ndarray:
 
 
 def rigid_candidates(mesh: Mesh) -> np.ndarray:
-    """``(n_nodes, 2, 6)``: translations and rotation of each body (:func:`cvxdual.geometry.rigid.candidates`)."""
+    """``(n_nodes, 2, 6)``: translations and rotation of each body (:func:`cvxdual.system.rigid.candidates`)."""
     return candidates(mesh).reshape(mesh.n_nodes, 2, 6)
 
 
@@ -98,7 +98,7 @@ def boundary_triangles(space) -> np.ndarray:
 def balance_loads(space) -> tuple[np.ndarray, float, float]:
     """Check the data on the floating modes; return the fixed parameters with a rounding-level
     imbalance removed from the loaded ones, the relative imbalance and the relative size of the
-    change (:func:`cvxdual.geometry.rigid.balance_correction`: least-norm, only along the motions
+    change (:func:`cvxdual.system.rigid.balance_correction`: least-norm, only along the motions
     the loaded parameters carry, refused above ``BALANCE_TOL`` of them)."""
     r = rigid_motions(space.mesh, joint=True)
     if r.shape[2] == 0:

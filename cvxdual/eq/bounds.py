@@ -20,9 +20,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SceneError
-from ..geometry.boundary import supports
 from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
+from ..system.boundary import supports
 from ..voigt import VOIGT_WEIGHT
 from .columns import CONCAVE1, column_gap
 from .edges import outward_normals

@@ -19,8 +19,8 @@ import time
 import cvxpy as cp
 import numpy as np
 
+from ..convex.base import USER_TOLERANCE, ConvexModel
 from ..errors import AccuracyError, ModelError
-from ..model.base import USER_TOLERANCE, ConvexModel
 from ..solution import EQ_TOLERANCES, Solution, SolverStats, failed_checks
 from ..voigt import out_of_plane_factor
 from .balance import make_exact
@@ -153,7 +153,7 @@ class EquilibriumModel(ConvexModel):
         against an exact field are not computed here (``cvxdual.solve(..., stress_space="eq")``
         gives them for the scene's own problem) and are listed in ``checks["skipped"]``."""
         from ..geometry.triangulation import discretize
-        from ..p0.assembly import assemble
+        from ..system.assembly import assemble
         from .bounds import admissibility_residuals, constraint_blocks
         self._require_solved()
         t0 = time.perf_counter()

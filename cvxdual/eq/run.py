@@ -1,6 +1,6 @@
 """The run in the equilibrium stress space (docs/equilibrium.md): the P1 displacement of the P0
 fast path, the exactly admissible equilibrium stresses of the same mesh (the fast route of
-:mod:`cvxdual.eq.fast` or the CVXPY model :class:`~cvxdual.eq.model.EquilibriumModel`), the
+:mod:`cvxdual.eq.active_set` or the CVXPY model :class:`~cvxdual.eq.model.EquilibriumModel`), the
 certified bounds between the two and the errors against an exact field, as one
 :class:`~cvxdual.solution.Solution`. :func:`certify` adds the same bounds to a P0 solution.
 """
@@ -12,17 +12,16 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..convex.solvers import FAST, TIME_LIMIT_OPTION
 from ..errors import SolverError
 from ..geometry.triangulation import discretize
-from ..model.solvers import FAST, TIME_LIMIT_OPTION
-from ..p0.assembly import assemble
-from ..p0.checks import skipped_error
-from ..p0.fast import solve_fast
-from ..p0.run import NOTHING_ACTS, nothing_acts, warm_start_pairs
 from ..progress import Deadline, phase
 from ..reference.exact import exact_reference
 from ..scene import Scene
-from ..solution import Solution, SolverStats, check_solution
+from ..solution import Solution, SolverStats, check_solution, skipped_error
+from ..system.assembly import assemble
+from ..system.displacement import NOTHING_ACTS, nothing_acts, solve_fast
+from ..system.warm_start import warm_start_pairs
 from .bounds import (
     certified_bounds,
     contact_slack,
@@ -41,7 +40,7 @@ def eq_stresses(space: EquilibriumSpace, solver: str, pairs: tuple | None = None
     ``pairs = (x, active)`` of a P0 solve on the same mesh (one iteration when the P0 contact zone
     is right, a few more where P0 locks), or from the coarser levels without them."""
     if solver == FAST:
-        from .fast import active_from_pairs, solve_eq_fast
+        from .active_set import active_from_pairs, solve_eq_fast
         start = None if pairs is None else active_from_pairs(space, *pairs)
         y, stats = solve_eq_fast(space, start)
         return space.stresses(y), space.column_values(y), stats
@@ -95,8 +94,10 @@ def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: b
             except SolverError:
                 if solver == FAST:
                     raise
-                from ..p0.dual import DualModel  # the CVXPY path was asked for: it gives the P1 displacement too
-                model = DualModel(system)
+                from ..system.primal import (
+                    PrimalModel,  # the CVXPY path was asked for: the P1 displacement by CVXPY too
+                )
+                model = PrimalModel(system)
                 model.solve(solver, time_limit=deadline.remaining() if solver in TIME_LIMIT_OPTION else None)
                 u, pairs = model.displacements(), None
             if solver != FAST:

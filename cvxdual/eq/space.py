@@ -40,15 +40,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError, SceneError
-from ..geometry.boundary import sliding_normal
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..geometry.quadrature import gauss01
 from ..geometry.triangles import edge_keys
 from ..geometry.triangulation import discretize
 from ..linalg.sparse import assemble_blocks
-from ..p0.assembly import Scales
 from ..scene.scene import Scene
+from ..system.assembly import Scales
+from ..system.boundary import sliding_normal
 from .balance import balance_loads, make_scales
 from .columns import FaceIntervals, check_column_data, column_energy, face_intervals, slab_interval
 from .edges import edge_ids, mesh_edges, outward_normals

@@ -186,7 +186,7 @@ _FACTOR = {"pardiso": _pardiso, "superlu": _superlu, "cholmod": _cholmod, "qdldl
 def start_up(method: str | None = None) -> None:
     """Pay one-time library start-up (BLAS thread discovery, the first factorisation by ``method``,
     default the large systems' backend): for steady-state timings (the speed "limit",
-    :func:`cvxdual.p0.fast.limit`, pays it for every backend it times)."""
+    :func:`cvxdual.system.displacement.limit`, pays it for every backend it times)."""
     with one_blas_thread():
         SPDFactor(sp.identity(8, format="csr"), method or backend()).solve(np.ones(8))
 

@@ -1,7 +1,7 @@
 """Scatters of element blocks into sparse matrices: the general one (:func:`assemble_blocks`)
 and the lower triangle of a symmetric sum (:func:`assemble_lower`, what Cholesky reads).
 ``E`` and ``A_h``, whose pieces share no column, are built directly in compressed form
-(:mod:`cvxdual.p0.assembly`)."""
+(:mod:`cvxdual.system.assembly`)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,11 @@
-"""The paper's stress space: one constant stress per piece (``S_h``). Assembly of ``E``,
-``A_h``, ``Z`` and the contact data (``assembly``), stress norms (``norms``), the checks of a
-solution (``checks``), the CVXPY dual a user may change (``dual``), an independent
-displacement QP (``primal``), the fast path's linear algebra (``fast``) and the run (``run``)."""
+"""The paper's stress space: one constant stress per piece (``S_h``). Stress norms (``norms``),
+the checks of a solution (``checks``), the CVXPY dual a user may change (``dual``) and the run
+(``run``); the assembly and the P1 displacement it shares with the equilibrium space live in
+:mod:`cvxdual.system`."""
 
 import importlib
 
-from .assembly import System, assemble
-
-_LAZY = {"DualModel": ".dual", "PrimalModel": ".primal"}  # load CVXPY: on first use
+_LAZY = {"DualModel": ".dual"}  # loads CVXPY: on first use
 
 
 def __getattr__(name):
@@ -16,4 +14,4 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["DualModel", "PrimalModel", "System", "assemble"]
+__all__ = ["DualModel"]

@@ -12,9 +12,9 @@ import time
 import numpy as np
 
 from ..reference.exact import exact_reference
-from ..solution import ACTIVE_TOL, FORCE_FLOOR, SolverStats, load_scale
+from ..solution import ACTIVE_TOL, FORCE_FLOOR, SolverStats, load_scale, skipped_error
+from ..system.assembly import System
 from ..voigt import VOIGT_WEIGHT
-from .assembly import System
 from .norms import stress_error
 
 
@@ -165,9 +165,3 @@ def evaluate(system: System, t: np.ndarray, u: np.ndarray, stats: SolverStats, f
             "objective": dual_objective(system, t), "duality_gap": res["duality_gap"], "residuals": res,
             "contact": contact, "exact": exact.data() if exact is not None else None,
             "error": error, "checks": skipped_error(res, why)}
-
-
-def skipped_error(residuals: dict, why: str | None) -> dict | None:
-    """A solution's ``checks`` when the scene's exact field does not solve it (``why``): every
-    residual applied, the error skipped with the reason; ``None`` (all applied) otherwise."""
-    return None if why is None else {"applied": dict(residuals), "skipped": {"error": why}}

@@ -10,7 +10,7 @@ residual force ``T^T R`` of a generator, and
 
 with the objective ``1/2 t.A_h t - t.E^T q0``. Paper names are kept (``t`` for ``lam_h``,
 ``J0``, ``J-``, ``eps``). The model is nondimensionalised (lengths by ``L``, stiffness by
-``E_ref``, stresses by ``sigma_ref``; :class:`~cvxdual.p0.assembly.Scales`); every expression it
+``E_ref``, stresses by ``sigma_ref``; :class:`~cvxdual.system.assembly.Scales`); every expression it
 offers to a user (``stress``, ``contact_force``, ...) is in physical units.
 
 The reformulations of docs/reformulate.md change rows, never the rest: Tresca friction
@@ -29,11 +29,11 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from ..convex.base import USER_TOLERANCE, ConvexModel
 from ..errors import AccuracyError, ModelError
-from ..model.base import USER_TOLERANCE, ConvexModel
 from ..solution import TOLERANCES, Solution, failed_checks, load_scale
+from ..system.assembly import System
 from ..voigt import out_of_plane_factor
-from .assembly import System
 from .checks import admissibility, complementarity, duality_gap, evaluate, penetration
 
 
@@ -68,7 +68,7 @@ def _per_pair(value, n_pairs: int, what: str, fix: str, allow_inf: bool):
 
 class DualModel(ConvexModel):
     """The CVXPY problem of the discrete dual, a modelling object a user may change
-    (:class:`~cvxdual.model.base.ConvexModel`: changes, solving, misuse errors).
+    (:class:`~cvxdual.convex.base.ConvexModel`: changes, solving, misuse errors).
 
     Handles: ``t`` (scaled stress Variable, ``3 n_pieces``), ``load_factor`` (a non-negative
     Parameter, default 1, multiplying the applied loads; a Variable with ``limit_analysis``),

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..system.assembly import System
 from ..voigt import VOIGT_WEIGHT
-from .assembly import System
 
 # points per direction for a solution's error against an exact field: 16 points a piece change
 # hertz's relative errors by ~1e-5 relative against an 8x8 rule, at under half a 6x6 rule's time

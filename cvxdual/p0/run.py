@@ -1,9 +1,9 @@
 """The paper's run in the P0 stress space: scene -> mesh and pieces -> assembly -> the CVXPY dual
 (:class:`~cvxdual.p0.dual.DualModel`) or its displacement form on the fast path
-(:mod:`cvxdual.p0.fast`) -> a checked :class:`~cvxdual.solution.Solution`.
+(:mod:`cvxdual.system.displacement`) -> a checked :class:`~cvxdual.solution.Solution`.
 
 The fast path starts from the active set of level ``L - 2`` (:func:`warm_start_pairs`, through
-:func:`cvxdual.fast.core.coarse_start`), solved the same way.
+:func:`cvxdual.activeset.core.coarse_start`), solved the same way.
 """
 
 from __future__ import annotations
@@ -14,27 +14,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import MeshError, SolverError
-from ..fast.core import coarse_start, transfer_active
+from ..convex.solvers import FAST, TIME_LIMIT_OPTION
 from ..geometry.triangulation import discretize
-from ..model.solvers import FAST, TIME_LIMIT_OPTION
 from ..progress import Deadline, phase
 from ..scene import Scene
 from ..solution import Solution, SolverStats, check_solution
-from .assembly import System, assemble
+from ..system.assembly import System, assemble
+from ..system.displacement import NOTHING_ACTS, nothing_acts, solve_fast
+from ..system.warm_start import warm_start_pairs
 from .checks import evaluate
-from .fast import solve_fast
 
 log = logging.getLogger(__name__)
-
-NOTHING_ACTS = "none (no load, no interference)"  # the solver of a scene where nothing acts
-
-
-def nothing_acts(system: System) -> bool:
-    """No load and no interference: ``lam = 0`` is admissible and ``S(lam) >= S(0)`` for every
-    admissible ``lam`` (contact forces are compressive, gaps ``>= 0``), so zero is the solution."""
-    return not np.any(system.f) and np.all(system.eps >= 0)
-
 
 def dual_model(system: System, triangulation: str, limit_analysis: bool = False):
     """The :class:`~cvxdual.p0.dual.DualModel` of ``system`` with its scene's friction, if any."""
@@ -44,31 +34,6 @@ def dual_model(system: System, triangulation: str, limit_analysis: bool = False)
     if friction is not None:
         model.add_friction(friction.g)
     return model
-
-
-def warm_start_pairs(scene: Scene, triangulation: str, level: int, pair_x: np.ndarray) -> np.ndarray | None:
-    """Initial active set for ``level`` at the pair abscissae ``pair_x``: the converged set of
-    level ``level - 2`` (:func:`~cvxdual.fast.core.coarse_start`), transferred; ``None`` below
-    level 2. A coarse level that the fast path cannot solve, or where nothing acts, gives no
-    hint: the next level starts cold; so does one that cannot be meshed (an outline's strip is
-    deepest there)."""
-    def solve_at(lv: int, coarser):
-        log.debug("warm start: the active set of level %d", lv)
-        try:
-            system = assemble(*discretize(scene, triangulation, lv))
-        except MeshError:
-            return None
-        if nothing_acts(system):
-            return None
-        x = system.mesh.pair_x
-        try:
-            _, stats = solve_fast(system, None if coarser is None else transfer_active(*coarser, x))
-        except SolverError:
-            return None
-        return x, stats.active
-
-    coarse = coarse_start(level, solve_at)
-    return None if coarse is None else transfer_active(*coarse, pair_x)
 
 
 def solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True,

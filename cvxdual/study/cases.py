@@ -487,10 +487,10 @@ def edge_share(sol, ex, rule: int) -> float:
 
 
 def _limit(case: Case, scene) -> dict:
-    """The speed "limit" (:func:`cvxdual.p0.fast.limit`): the fastest factorisation plus solve of the
+    """The speed "limit" (:func:`cvxdual.system.displacement.limit`): the fastest factorisation plus solve of the
     stiffness, all pairs closed, among the installed backends."""
     from .. import assemble, discretize
-    from ..p0.fast import limit
+    from ..system.displacement import limit
     t0 = time.perf_counter()
     mesh, pieces, ties = discretize(scene, case.triangulation, case.level)
     system = assemble(mesh, pieces, ties)

@@ -31,7 +31,7 @@ LEVELS = {"hertz": [0, 1, 2, 3, 4, 5], "blocks": [0, 1, 2, 3, 4, 5], "patch": [1
 # the errors, rates and effectivities use the levels at least two below it (0-3), level 4 adds its
 # bounds (guarantees, brackets, type 1 against type 2)
 REFERENCE = {"level": 5, "stress_space": "eq"}
-EQ_SOLVER = "fast"  # cvxdual.eq.fast: the same QP as the CVXPY path, checked against it in the tests
+EQ_SOLVER = "fast"  # cvxdual.eq.active_set: the same QP as the CVXPY path, checked against it in the tests
 TARGET = 0.01  # "the time each space needs for 1% stress error"
 
 

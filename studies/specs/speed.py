@@ -23,7 +23,7 @@ LARGE_SOLVERS_LEVEL = 5  # hertz type 2: 147,456 pieces, "about 1e5"
 # and failed at 3.7e4 pieces, ProxQP (dense in CVXPY) needs n^2 memory, CVXOPT and DAQP take over
 # 100 s at 2.3k pieces (all measured while choosing these settings; the small case shows it again)
 NOT_LARGE = ("HIGHS", "PROXQP", "CVXOPT", "DAQP")
-# the QP solvers CVXPY can call that are compared (their options: cvxdual.model.solvers.SOLVER_OPTIONS)
+# the QP solvers CVXPY can call that are compared (their options: cvxdual.convex.solvers.SOLVER_OPTIONS)
 QP_CANDIDATES = ("CLARABEL", "SCS", "ECOS", "CVXOPT", "HIGHS", "QOCO", "OSQP", "PIQP", "PROXQP", "DAQP")
 QUICK_SOLVERS = ("CLARABEL", "OSQP", "SCS")
 UNIFORM = {"mesh": {"grading": 1.0}}
@@ -70,7 +70,8 @@ SPEC = {
         "Machine: 2 cores, shared; every measurement in its own process with one thread (`studies/speed.py` runs "
         "one case at a time), all ratios from one run. Paths: `cvxpy` = the dual QP built in CVXPY and solved by "
         "Clarabel (the reference path); `fast` = the condensed displacement form solved by a primal-dual "
-        "active set method with sparse SPD factorisations, warm-started from level L-2 (`cvxdual.p0.fast`). "
+        "active set method with sparse SPD factorisations, warm-started from level L-2 "
+        "(`cvxdual.system.displacement`). "
         "`limit` = the fastest sparse SPD factorisation plus solve of the stiffness `K` (all contact pairs "
         "closed) that cvxdual can call, the same size and sparsity as the fast path's matrix; it excludes "
         "building `K`."),
@@ -356,7 +357,7 @@ def report(df: pd.DataFrame, study, out) -> str:
         f"not run at level {LARGE_SOLVERS_LEVEL}: {', '.join(NOT_LARGE)} (out of memory or over 100 s at 2.3k "
         "pieces when these settings were chosen).", "",
         md_table(_solver_table(solv[solv.solver != "fast"])), "",
-        "The default when no solver is named (`cvxdual.model.solvers.default_solver`), against the fastest accepted "
+        "The default when no solver is named (`cvxdual.convex.solvers.default_solver`), against the fastest accepted "
         "solver of each size in this run:", "", md_table(_default_table(solv)), ""]
     return "\n".join(lines)
 
@@ -618,7 +619,7 @@ def _solver_table(s: pd.DataFrame) -> pd.DataFrame:
 
 
 def _default_table(s: pd.DataFrame) -> pd.DataFrame:
-    from cvxdual.model.solvers import default_solver
+    from cvxdual.convex.solvers import default_solver
     t = _solver_table(s[s.solver != "fast"])
     rows = []
     if not len(t):

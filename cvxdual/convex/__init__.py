@@ -1,4 +1,4 @@
-"""What the CVXPY models of both stress spaces share: :class:`~cvxdual.model.base.ConvexModel`
+"""What the CVXPY models of both stress spaces share: :class:`~cvxdual.convex.base.ConvexModel`
 (named constraints, user changes, load sweeps on cached solver data, misuse errors), the solver
 names, options and the mapping of CVXPY's statuses to cvxdual's exceptions (``solvers``), and
 the one place that calls CVXPY's internals (``cvxpy_internals``). The models themselves live

@@ -14,10 +14,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError, SceneError
+from ..geometry.mesh import Mesh
+from ..geometry.pieces import Pieces
+from ..geometry.quadrature import gauss01
 from ..reference.exact import exact_field
-from .mesh import Mesh
-from .pieces import Pieces
-from .quadrature import gauss01
 
 
 def in_part(part, points: np.ndarray, nodes: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ DEFAULT_SOLVER = "CLARABEL"  # the reference, and where every other path hands o
 # 4e4-1.5e5 pieces, every accuracy check passed, hard cases included; below, the two tie
 # within noise and Clarabel keeps the wider margins (reports/speed.md, "QP solvers")
 LARGE_QP = 20_000
-FAST = "FAST"  # the active-set path of cvxdual.p0.fast, not a CVXPY solver
+FAST = "FAST"  # the active-set path of cvxdual.system.displacement, not a CVXPY solver
 
 # The QP solvers CVXPY can call for the dual, with the options that give each a chance at the
 # accuracy the package promises (README): the one table the package and the speed study use.

@@ -19,11 +19,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import SceneError
-from ..geometry.boundary import Supports, free_dofs, load_vector, prolongation, supports, to_frames
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
-from ..geometry.rigid import rigid_modes
 from ..linalg.sparse import assemble_blocks
+from .boundary import Supports, free_dofs, load_vector, prolongation, supports, to_frames
+from .rigid import rigid_modes
 
 STRAIN_RANGE = (1e-30, 1e6)  # load / stiffness ratios the package computes with
 
@@ -58,7 +58,7 @@ class System:
     C: np.ndarray  # (n_pieces, 3, 3) Hooke matrix of each piece
     f: np.ndarray  # (n_dofs,) load vector, balanced on the floating modes
     load_imbalance: float  # relative work of the raw loads on the floating modes
-    load_correction: float  # |df| / |f| of the change that balanced them (geometry.rigid.balance_correction)
+    load_correction: float  # |df| / |f| of the change that balanced them (system.rigid.balance_correction)
     supports: Supports  # fixed components and node frames
     rdof: np.ndarray  # (n_dofs,) index in r of each node's frame component, or -1 if fixed
     Z: sp.csr_matrix  # (n_dofs, n_r): q = Z r

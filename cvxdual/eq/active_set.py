@@ -1,5 +1,5 @@
 """The fast path of the equilibrium (Johnson-Mercier) dual (docs/equilibrium.md, section 10):
-the active-set method of :mod:`cvxdual.fast.core` on the KKT system of the QP of
+the active-set method of :mod:`cvxdual.activeset.core` on the KKT system of the QP of
 :class:`~cvxdual.eq.model.EquilibriumModel`, condensed by hybridisation to an SPD system; this
 module is its linear algebra.
 
@@ -30,8 +30,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from ..activeset.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active, worst_flipped
 from ..errors import MeshError, SolverError
-from ..fast.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active, worst_flipped
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
 from .balance import PROJECT_TOL, make_exact, rigid_motions
@@ -167,14 +167,14 @@ def pair_jumps(space: EquilibriumSpace) -> np.ndarray:
 def active_from_pairs(space: EquilibriumSpace, x: np.ndarray, active: np.ndarray) -> np.ndarray:
     """Contact parameters ``(n_c, 2)`` in contact for an active set ``active`` given at abscissae
     ``x`` (the P0 fast path's pairs, or the ``contact_x`` of a coarser equilibrium solve):
-    :func:`cvxdual.fast.core.transfer_active` on the sorted points."""
+    :func:`cvxdual.activeset.core.transfer_active` on the sorted points."""
     x, a = np.asarray(x, float).ravel(), np.asarray(active, bool).ravel()
     order = np.argsort(x, kind="stable")
     return transfer_active(x[order], a[order], space.contact_x)
 
 
 class HybridSolver:
-    """The linear algebra of the active-set method (:mod:`cvxdual.fast.core`) on the equilibrium
+    """The linear algebra of the active-set method (:mod:`cvxdual.activeset.core`) on the equilibrium
     dual of one :class:`EquilibriumSpace`, in the nondimensional variables of
     :class:`~cvxdual.eq.model.EquilibriumModel`. It keeps the factor of the last contact set
     (:meth:`finish` reuses it, then :meth:`close` frees it)."""
@@ -617,7 +617,7 @@ class HybridSolver:
 
 def coarse_active(space: EquilibriumSpace) -> np.ndarray | None:
     """Initial contact set ``(n_c, 2)`` from level ``L - 2`` of the same scene
-    (:func:`cvxdual.fast.core.coarse_start`: every coarser level warm-started the same way, all
+    (:func:`cvxdual.activeset.core.coarse_start`: every coarser level warm-started the same way, all
     in contact below level 2), transferred to ``space.contact_x``; ``None`` below level 2. A level
     that cannot be meshed gives no hint."""
     def solve_at(level: int, coarser):

@@ -1,5 +1,5 @@
 """The one place where cvxdual calls CVXPY below its documented modelling API: the load sweep
-(:meth:`cvxdual.model.base.ConvexModel._runner`) keeps a solver's data and solves it again with a
+(:meth:`cvxdual.convex.base.ConvexModel._runner`) keeps a solver's data and solves it again with a
 new right-hand side, skipping CVXPY's recompilation. That needs CVXPY's solving chain: the list of
 conic solvers, the chain's solver, ``SolvingChain.solve_via_data`` and ``Problem.unpack_results``.
 They are not covered by CVXPY's deprecation policy, so ``pyproject.toml`` caps CVXPY at the major

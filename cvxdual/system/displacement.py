@@ -1,6 +1,7 @@
-"""The fast path of the P0 dual: the same discrete problem in its condensed displacement form
+"""The P1 displacement on the fast path (the P0 dual in its condensed displacement form,
+the kinematic side both stress spaces share
 (docs/theory.md#the-displacement-form-and-the-fast-path), solved by the active-set method of
-:mod:`cvxdual.fast.core` with sparse SPD factorisations; this module is its linear algebra.
+:mod:`cvxdual.activeset.core` with sparse SPD factorisations; this module is its linear algebra.
 
 ``min 1/2 r.K r - g.r`` subject to ``r''_y(B_k) - r'_y(A_k) <= eps_k``, with
 ``K = Z^T E A_h^-1 E^T Z``: for type 1 this is exactly the Lagrangian dual of the stress QP, so
@@ -24,8 +25,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from ..activeset.core import ActiveSetStats, cover, iterate, worst_flipped
 from ..errors import SolverError
-from ..fast.core import ActiveSetStats, cover, iterate, worst_flipped
 from ..linalg.factor import SPDFactor, backends, one_blas_thread, start_up
 from ..linalg.sparse import assemble_lower
 from ..solution import SolverStats
@@ -79,8 +80,8 @@ class _Base:
 
 
 class DisplacementSolver:
-    """The linear algebra of the active-set method (:mod:`cvxdual.fast.core`) on the displacement
-    form of one assembled :class:`~cvxdual.p0.assembly.System`."""
+    """The linear algebra of the active-set method (:mod:`cvxdual.activeset.core`) on the displacement
+    form of one assembled :class:`~cvxdual.system.assembly.System`."""
 
     what = "fast path"
     advice = ("use the CVXPY path (solver='CLARABEL')", "use the CVXPY path (--solver CLARABEL)")
@@ -250,7 +251,7 @@ class DisplacementSolver:
 
     def solve(self, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(r, active)``: free displacements and the converged active set, from ``active`` (or
-        the first pairs to touch), completed by :func:`~cvxdual.fast.core.cover`."""
+        the first pairs to touch), completed by :func:`~cvxdual.activeset.core.cover`."""
         s = self.system
         A = self.initial() if active is None else cover(np.asarray(active, bool), s.eps, self.jumps)
         A, (r, _) = iterate(self, A)
@@ -295,3 +296,12 @@ def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.nda
         solver="fast", status="optimal", iterations=st.iterations, solve_time=time.perf_counter() - t0,
         backend=st.backend, factorizations=st.factorizations, factor_time=st.factor_time,
         schur_updates=st.schur_updates, max_update=st.max_update, refinements=st.refinements, active=A)
+
+
+NOTHING_ACTS = "none (no load, no interference)"  # the solver of a scene where nothing acts
+
+
+def nothing_acts(system: System) -> bool:
+    """No load and no interference: ``lam = 0`` is admissible and ``S(lam) >= S(0)`` for every
+    admissible ``lam`` (contact forces are compressive, gaps ``>= 0``), so zero is the solution."""
+    return not np.any(system.f) and np.all(system.eps >= 0)

@@ -1,7 +1,7 @@
 """The active-set core shared by both fast solvers: a primal-dual active set method
 (semismooth Newton; Hintermueller, Ito and Kunisch 2002) for a convex QP whose inequality
 constraints are the contact unknowns: the pairs of the P0 displacement form
-(:mod:`cvxdual.p0.fast`) or the contact parameters of the equilibrium dual (:mod:`cvxdual.eq.fast`).
+(:mod:`cvxdual.system.displacement`) or the contact parameters of the equilibrium dual (:mod:`cvxdual.eq.active_set`).
 
 A solver brings its linear algebra as an :class:`ActiveSetSolver`: ``solve_set(A)`` solves the
 equality-constrained QP of the active set ``A`` (a boolean array over the contact unknowns) and
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import SolverError
 
-log = logging.getLogger("cvxdual.fast")
+log = logging.getLogger("cvxdual.activeset")
 
 # Iterations before giving up (the two solvers had 60 and 50). Warm starts take 1-4 and cold
 # starts about 10 on the built-in scenes (tests/test_fast.py, tests/test_eqfast.py): the limit

@@ -13,8 +13,9 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
+from ..convex.solvers import solve_problem
 from ..errors import ModelError
-from ..model.solvers import solve_problem
+from ..solution import SolverStats
 from .assembly import System
 
 
@@ -48,7 +49,7 @@ class PrimalModel:
         self.problem = cp.Problem(cp.Minimize(0.5 * cp.quad_form(self.r, K, assume_PSD=True) - g @ self.r),
                                   list(cons.values()))
 
-    def solve(self, solver: str = "CLARABEL", **options) -> dict:
+    def solve(self, solver: str = "CLARABEL", **options) -> SolverStats:
         return solve_problem(self.problem, solver, "primal QP", **options)
 
     def displacements(self) -> np.ndarray:

@@ -71,7 +71,7 @@ def rigid_modes(mesh, pieces, sup, rdof: np.ndarray, ja: np.ndarray, jb: np.ndar
     """Find the rigid motions of ``V_h``; check and balance the loads ``f`` on them.
 
     A combination of the candidates is a motion of ``V_h`` if it respects fixed and tied dofs
-    (components in the nodes' frames, ``sup`` the :class:`~cvxdual.geometry.boundary.Supports`)
+    (components in the nodes' frames, ``sup`` the :class:`~cvxdual.system.boundary.Supports`)
     and strains no piece.
     """
     cand = candidates(mesh)

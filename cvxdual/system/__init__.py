@@ -1,0 +1,20 @@
+"""The discrete system both stress spaces share: supports, node frames and loads on the mesh
+(``boundary``), rigid motions and load balance (``rigid``), the assembly of ``E``, ``A_h``, ``Z``
+and the contact data (``assembly``), and the kinematic side, the P1 displacement: its fast path
+with the warm start from coarser levels (``displacement``) and an independent CVXPY displacement
+QP (``primal``)."""
+
+import importlib
+
+from .assembly import System, assemble
+
+_LAZY = {"PrimalModel": ".primal"}  # loads CVXPY: on first use
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["PrimalModel", "System", "assemble"]
