@@ -97,12 +97,12 @@ def _cmd_solve(args) -> int:
     from .geometry.triangulation import check_triangulation
     from .outputs.figures import Plot, names_plot, parse_plots
     from .outputs.output_set import check_output_dir, write_outputs
-    from .pipeline import solve
+    from .pipeline import solve, space_of
     from .scene.scenefile import load_scene, parse_assignment
     from .validate import file_stem
 
     plots = parse_plots(args.plots)  # an unknown figure name: one error line before any work
-    if names_plot(args.plots, Plot.BOUNDS) and not (args.bounds or args.stress_space == "eq"):
+    if names_plot(args.plots, Plot.BOUNDS) and not (args.bounds or space_of(args.stress_space).certifies):
         raise CvxdualError("--plots bounds needs certified bounds: add --bounds or --stress-space eq")
     time_limit = check_time_limit(args.time_limit)
     # the hard stop covers reading the scene too (bounded work: a .geo file is read, never run)

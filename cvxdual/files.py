@@ -40,6 +40,7 @@ import secrets
 import shutil
 import sys
 import tempfile
+from collections.abc import Mapping
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -269,7 +270,7 @@ def replace_dir(stage: str | Path, out: str | Path, check=None) -> None:
 def to_jsonable(obj):
     """Plain Python for JSON: NumPy scalars and arrays converted, non-finite floats as ``None``,
     anything else that JSON cannot hold as its ``str``."""
-    if isinstance(obj, dict):
+    if isinstance(obj, Mapping):  # dicts and the frozen records (cvxdual.records)
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [to_jsonable(v) for v in obj]

@@ -2,9 +2,10 @@
 :func:`build_system` (docs/theory.md).
 
 ``solve(scene)`` checks the request, estimates its memory, and runs it in its stress space
-(:func:`cvxdual.p0.run.solve_p0`, :func:`cvxdual.eq.run.solve_eq`); here is the policy that
+(:func:`space_of` maps a name to its :class:`~cvxdual.system.stress_space.StressSpace`: the paper's
+:class:`~cvxdual.p0.run.P0Stresses` or :class:`~cvxdual.eq.run.EquilibriumStresses`); here is the policy that
 hands a failed fast path (or a failed default solver) over to Clarabel, and the bounds of a
-P0 run (:func:`cvxdual.eq.run.certify`).
+P0 run (the equilibrium space's ``certify``).
 """
 
 from __future__ import annotations
@@ -14,29 +15,29 @@ from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
-from .convex.solvers import DEFAULT_SOLVER, FAST, default_solver, resolve_solver
+from .convex.solvers import DEFAULT_SOLVER, FAST, resolve_solver
 from .errors import AccuracyError, CvxdualError, SceneError, SolverError, TooLargeError
 from .geometry.mesh import check_level, mesh_size
-from .geometry.outline_mesh import gmsh_seconds
+from .geometry.outline import gmsh_seconds
 from .geometry.triangulation import check_triangulation, discretize
-from .p0.run import dual_model, solve_p0  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
+from .kinds import Space
+from .p0.run import P0Stresses  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
 from .progress import Deadline, phase
 from .scene import Scene
 from .sizing import check_size
 from .solution import Solution
 from .system.assembly import System, assemble
+from .system.stress_space import StressSpace
 from .validate import one_line, short
 
 log = logging.getLogger(__name__)
 
-STRESS_SPACES = ("p0", "eq")  # the paper's piecewise-constant stresses; equilibrium (docs/equilibrium.md)
-
-
-def check_stress_space(name) -> str:
-    name = str(name).lower()
-    if name not in STRESS_SPACES:
-        raise CvxdualError(f"unknown stress space {name!r}; choose one of {', '.join(STRESS_SPACES)}")
-    return name
+def space_of(name) -> StressSpace:
+    """The :class:`~cvxdual.system.stress_space.StressSpace` named ``name`` (:meth:`Space.parse`)."""
+    if Space.parse(name) is Space.P0:
+        return P0Stresses()
+    from .eq.run import EquilibriumStresses  # the equilibrium space loads on first use
+    return EquilibriumStresses()
 
 
 def as_scene(scene) -> Scene:
@@ -62,16 +63,11 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
     ``stress_space="eq"`` an :class:`~cvxdual.eq.model.EquilibriumModel` (frictionless)."""
     scene = as_scene(scene)
     triangulation = check_triangulation(triangulation)
-    if check_stress_space(stress_space) == "eq":
-        from .eq.model import EquilibriumModel
-        from .eq.space import EquilibriumSpace
-        if scene.friction is not None:
-            raise CvxdualError("the equilibrium stress space is frictionless; drop the scene's friction or use "
-                               "stress_space='p0'")
-        system = build_system(scene, triangulation, level)
-        space = EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
-        return EquilibriumModel(space, limit_analysis, system)
-    return dual_model(build_system(scene, triangulation, level), triangulation, limit_analysis)
+    space = space_of(stress_space)
+    if scene.friction is not None and not space.frictional:
+        raise CvxdualError(f"the {space.name} stress space is frictionless; drop the scene's friction or use "
+                           "stress_space='p0'")
+    return space.model(build_system(scene, triangulation, level), triangulation, limit_analysis)
 
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
@@ -114,10 +110,10 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
     gmsh0 = gmsh_seconds()
     chosen = solver is None and not solver_options  # options name their solver: Clarabel's, as always
     triangulation = check_triangulation(triangulation)
-    stress_space = check_stress_space(stress_space)
+    space = space_of(stress_space)
     level = check_level(scene.mesh.default_level if level is None else level)
     if scene.friction is not None:
-        if stress_space == "eq" or bounds:
+        if not space.frictional or bounds:
             raise CvxdualError("the equilibrium stress space and the bounds are frictionless; drop the scene's "
                                "friction or solve with stress_space='p0' and no bounds",
                                cli="the equilibrium stress space and the bounds are frictionless; drop the scene's "
@@ -128,15 +124,14 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
         if chosen:
             solver = DEFAULT_SOLVER  # friction rows measured with Clarabel only
     if chosen and scene.friction is None:
-        # eq: the fast route solves the same QP exactly, ~20x sooner than Clarabel (punch-on-block, level 2)
-        solver = FAST if stress_space == "eq" else default_solver(mesh_size(scene, level)["triangles"])
+        solver = space.default_solver(mesh_size(scene, level)["triangles"])
     solver = resolve_solver(solver)
     deadline.fast = solver == FAST
     if solver == FAST and solver_options:
         raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
                           "drop them or choose a CVXPY solver such as CLARABEL")
-    check_size(scene, level, solver == FAST, stress_space, bounds, max_memory)
-    attempt = partial(_attempt, scene, triangulation, level, stress_space, bounds, check=check,
+    check_size(scene, level, solver == FAST, space.name, bounds, max_memory)
+    attempt = partial(_attempt, scene, triangulation, level, space, bounds, check=check,
                       warm_start=warm_start, deadline=deadline, verbose=verbose)
     try:
         try:
@@ -149,7 +144,7 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
             reason = one_line(e.reason or e, 120)  # its advice (use Clarabel) is what follows
             name = "the fast path" if solver == FAST else solver
             try:
-                check_size(scene, level, False, stress_space, bounds, max_memory)
+                check_size(scene, level, False, space.name, bounds, max_memory)
                 log.info("%s failed (%s); solving with %s", name, reason, DEFAULT_SOLVER)
                 sol = attempt(DEFAULT_SOLVER)
             except CvxdualError as e2:  # both paths failed: both reasons, short, and what is left to try
@@ -178,16 +173,12 @@ def _gmsh_timed(sol: Solution, scene: Scene, before: float) -> Solution:
     return replace(sol, timings={**sol.timings, "gmsh": gmsh_seconds() - before})
 
 
-def _attempt(scene: Scene, triangulation: str, level: int, stress_space: str, bounds: bool, solver: str,
+def _attempt(scene: Scene, triangulation: str, level: int, space: StressSpace, bounds: bool, solver: str,
              **options) -> Solution:
-    """One run with ``solver`` in ``stress_space``, and the bounds of a P0 run if asked for."""
-    if stress_space == "eq":
-        from .eq.run import solve_eq
-        return solve_eq(scene, triangulation, level, solver, **options)
-    sol = solve_p0(scene, triangulation, level, solver, **options)
-    if bounds:
-        from .eq.run import certify
+    """One run with ``solver`` in ``space``, and bounds where asked for and the space gives none."""
+    sol = space.run(scene, triangulation, level, solver, **options)
+    if bounds and not space.certifies:
         with phase("bounds", options.get("deadline")) as p:
-            sol = certify(sol)
+            sol = space_of(Space.EQ).certify(sol)
             p.detail = "the displacement against the equilibrium stresses of the same mesh"
     return sol

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from .errors import TooLargeError
 from .geometry.mesh import mesh_size
 from .geometry.triangulation import column_breaks
+from .kinds import Space
 from .memory import available_memory
 from .validate import short
 
@@ -35,6 +36,12 @@ ENV = "CVXDUAL_MAX_MEMORY"
 PLAUSIBLE_MEMORY = 1e14  # bytes: more than any one machine has (100 TB)
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
           "TIB": 2**40}
+
+
+# the rows of BYTES_PER_TRIANGLE a run adds up, by stress space and path (fast or not): the eq
+# space needs the P1 displacement by the fast path first, then its own stresses
+RUN_ROWS = {(Space.P0, True): ("fast",), (Space.P0, False): ("cvxpy",),
+            (Space.EQ, True): ("fast", "eq"), (Space.EQ, False): ("fast", "eq_cvxpy")}
 
 
 @dataclass(frozen=True)
@@ -52,11 +59,11 @@ class Estimate:
 def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False) -> Estimate:
     """Estimated triangles, nodes and peak memory of solving ``scene`` at ``level``."""
     n = mesh_size(scene, level, column_breaks(scene))
-    cost = BYTES_PER_TRIANGLE["fast" if fast or stress_space == "eq" else "cvxpy"]
-    if stress_space == "eq" and not fast:
-        cost += BYTES_PER_TRIANGLE["eq_cvxpy"]
-    elif stress_space == "eq" or bounds:  # bounds of a P0 run: the equilibrium stresses by the fast route
-        cost += BYTES_PER_TRIANGLE["eq"]
+    space = Space.parse(stress_space)
+    rows = RUN_ROWS[space, bool(fast)]
+    if bounds and space is Space.P0:  # bounds of a P0 run: the equilibrium stresses by the fast route
+        rows += ("eq",)
+    cost = sum(BYTES_PER_TRIANGLE[r] for r in rows)
     return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
 
 

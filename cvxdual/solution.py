@@ -17,10 +17,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import AccuracyError
+from .kinds import Space
+from .records import Checks
 
 if TYPE_CHECKING:  # annotations only: a solution holds the objects of the layers that built it
     from .scene import Scene
     from .system.assembly import System
+    from .system.field import StressField
 
 # What every returned solution satisfies (relative measures, defined in Solution.residuals).
 # Clarabel's default tolerances (1e-8 on gaps and feasibility) leave these with a margin of
@@ -31,6 +34,7 @@ TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5
 # equilibrium stresses (stress space "eq") are exactly admissible: every constraint to rounding
 # relative to the stress scale (the exactness post-step brings them to ~1e-14)
 EQ_TOLERANCES = {"admissibility": 1e-9, "penetration": 1e-12}
+SPACE_TOLERANCES = {Space.P0: TOLERANCES, Space.EQ: EQ_TOLERANCES}
 BOUND_KEYS = ("energy_upper", "energy_lower", "gap", "error_bound", "guaranteed", "reasons", "data_oscillation")
 
 # contact.csv and Solution.contact_table(), one row per pair: tangential_force is the x force of
@@ -114,18 +118,18 @@ def load_scale(system: System) -> float:
 @dataclass(frozen=True)
 class Solution:
     """A solved scene, built complete by :func:`cvxdual.solve` and never changed afterwards.
-    Arrays: ``stress`` ``(n_pieces, 3)`` (stress space ``p0``) or the Voigt values at the
-    vertices of every sub-triangle ``(n_sub, 3, 3)`` (``eq``, with ``column_stress`` on the curved
-    pieces), ``displacement`` ``(n_nodes, 2)``
-    (for ``eq`` the P1 displacement of the bounds, pointwise admissible), contact arrays
-    ``(n_pairs,)`` ordered by ``x``; ``timings`` in seconds per phase."""
+    ``field`` is the stress field (:class:`~cvxdual.system.field.StressField`: evaluate it
+    ``at`` points, integrate it by its ``rule``, whichever space made it); ``stress`` its values,
+    ``(n_pieces, 3)`` (stress space ``p0``) or the Voigt values at the vertices of every
+    sub-triangle ``(n_sub, 3, 3)`` (``eq``, with ``column_stress`` on the curved pieces).
+    ``displacement`` ``(n_nodes, 2)`` (for ``eq`` the P1 displacement of the bounds, pointwise
+    admissible), contact arrays ``(n_pairs,)`` ordered by ``x``; ``timings`` in seconds per phase."""
 
     scene: Scene
     triangulation: str
-    stress_space: str
     level: int
     system: System
-    stress: np.ndarray
+    field: StressField
     displacement: np.ndarray
     solver: SolverStats
     timings: dict
@@ -139,9 +143,23 @@ class Solution:
     # the checks applied ({name: residual}) and skipped ({name: reason}); None: all of tolerances()
     checks: dict | None = None
     space: object | None = None  # the EquilibriumSpace of an "eq" solution or of the bounds
-    # an "eq" solution's column stresses on the curved pieces: the vertical stress g at both ends of
-    # every column (n_col, 2) (cvxdual.eq.columns); empty on flat faces, None for "p0"
-    column_stress: np.ndarray | None = None
+
+    @property
+    def stress_space(self) -> Space:
+        """The space of the stress field."""
+        return self.field.space_name
+
+    @property
+    def stress(self) -> np.ndarray:
+        """The stress field's values (see the class docstring)."""
+        return self.field.stress
+
+    @property
+    def column_stress(self) -> np.ndarray | None:
+        """An ``eq`` solution's column stresses on the curved pieces: the vertical stress ``g`` at
+        both ends of every column ``(n_col, 2)`` (:mod:`cvxdual.eq.columns`); empty on flat faces,
+        None for ``p0``."""
+        return self.field.column
 
     def __repr__(self) -> str:
         """A few lines, not the arrays (those ran to 100 kB): what was solved, how, and the main
@@ -153,7 +171,7 @@ class Solution:
                 return default
 
         L, S = get(lambda: tuple(self.scene.units), ("L", "S"))
-        n = get(lambda: 3 * self.space.n_tri if self.stress_space == "eq" else self.system.n_pieces)
+        n = get(lambda: self.field.n_pieces)
         c = self.contact if isinstance(self.contact, Mapping) else {}
         force = get(lambda: f"{float(c['total_force']):.4g} {S}*{L}")
         lines = [f"Solution({get(lambda: self.scene.name)!r}, stress space {self.stress_space}, "
@@ -199,7 +217,7 @@ class Solution:
         """The ``summary.json`` contract (README, "Outputs")."""
         s = self.system
         c = self.contact
-        eq = self.stress_space == "eq"
+        load_imbalance, load_correction = self.field.balance
         return {
             "scene": self.scene.name,
             "triangulation": self.triangulation,
@@ -209,9 +227,9 @@ class Solution:
             "friction": None if self.scene.friction is None else  # JSON has no inf: full stick as "inf"
             {"kind": self.scene.friction.kind, "g": self.scene.friction.g if np.isfinite(self.scene.friction.g)
              else "inf"},
-            "n_pieces": 3 * self.space.n_tri if eq else s.n_pieces,
-            "piece_kinds": {"sub_triangle": 3 * self.space.n_tri} if eq else s.pieces.counts(),
-            "n_stress_unknowns": self.space.n_y if eq else 3 * s.n_pieces,
+            "n_pieces": self.field.n_pieces,
+            "piece_kinds": self.field.piece_kinds(),
+            "n_stress_unknowns": self.field.n_unknowns,
             "n_dofs": s.n_dofs,
             "n_free_dofs": s.n_r,
             "n_contact_pairs": len(s.jb),
@@ -223,8 +241,8 @@ class Solution:
             "iterations": self.solver.iterations,
             "objective": self.objective,
             "duality_gap": self.duality_gap,
-            "load_imbalance": self.space.load_imbalance if eq else s.load_imbalance,
-            "load_correction": self.space.load_correction if eq else s.load_correction,
+            "load_imbalance": load_imbalance,
+            "load_correction": load_correction,
             "residuals": dict(self.residuals),
             "contact": {k: c[k] for k in ("n_active", "x_min", "x_max", "max_pressure", "total_force")},
             "exact": self.exact,
@@ -237,7 +255,7 @@ class Solution:
 
 def tolerances(sol: Solution) -> dict:
     """The residual tolerances ``sol`` promises (its stress space's)."""
-    return EQ_TOLERANCES if sol.stress_space == "eq" else TOLERANCES
+    return SPACE_TOLERANCES[sol.stress_space]
 
 
 def failed_checks(applied: dict, tol: dict) -> str:
@@ -266,7 +284,7 @@ def check_solution(sol: Solution) -> None:
         raise AccuracyError(f"{what}; {advice['api']}", cli=f"{what}; {advice['cli']}")
 
 
-def skipped_error(residuals: dict, why: str | None) -> dict | None:
+def skipped_error(residuals: dict, why: str | None) -> Checks | None:
     """A solution's ``checks`` when the scene's exact field does not solve it (``why``): every
     residual applied, the error skipped with the reason; ``None`` (all applied) otherwise."""
-    return None if why is None else {"applied": dict(residuals), "skipped": {"error": why}}
+    return None if why is None else Checks(applied=dict(residuals), skipped={"error": why})

@@ -1,4 +1,4 @@
-"""The cost of gmsh's fence (cvxdual.geometry.gmsh_fence): writes reports/gmsh_fence.md and .csv.
+"""The cost of gmsh's fence (cvxdual.geometry.outline.fence): writes reports/gmsh_fence.md and .csv.
 
     python studies/gmsh_fence.py            # into reports/ (about a minute)
     python studies/gmsh_fence.py --quick    # levels 1-3, into out/gmsh_fence-quick
@@ -19,13 +19,11 @@ import pandas as pd
 
 import cvxdual as cd
 from cvxdual.files import write_text
-from cvxdual.geometry import gmsh_fence
 from cvxdual.geometry.mesh import column_abscissae
-from cvxdual.geometry.outline_mesh import gmsh_mesh
-from cvxdual.geometry.outline_sizes import strip_depth
+from cvxdual.geometry.outline import fence, gmsh_mesh, strip_depth
 from cvxdual.study.report import md_table
 
-FENCED = "cvxdual.geometry.outline_mesh:gmsh_mesh"
+FENCED = "cvxdual.geometry.outline.mesher:gmsh_mesh"
 
 
 def request(scene, level):
@@ -50,8 +48,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     out = Path(args.out or ("out/gmsh_fence-quick" if args.quick else "reports"))
     levels = range(1, 4) if args.quick else range(1, 6)
-    gmsh_fence.stop()
-    start, _ = timed(gmsh_fence.in_gmsh, FENCED, *request(cd.load_scene("block-with-hole"), 0))
+    fence.stop()
+    start, _ = timed(fence.in_gmsh, FENCED, *request(cd.load_scene("block-with-hole"), 0))
     rows = []
     for name in ("block-with-hole", "rounded-punch"):
         scene = cd.load_scene(name)
@@ -61,7 +59,7 @@ def main(argv=None) -> int:
             for _ in range(args.repeat):
                 t, a = timed(gmsh_mesh, *req)
                 inside.append(t)
-                t, b = timed(gmsh_fence.in_gmsh, FENCED, *req)
+                t, b = timed(fence.in_gmsh, FENCED, *req)
                 fenced.append(t)
             assert (a.points == b.points).all() and (a.triangles == b.triangles).all()  # the same mesh
             ti, tf = statistics.median(inside), statistics.median(fenced)

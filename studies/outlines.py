@@ -27,10 +27,9 @@ import numpy as np
 import pandas as pd
 
 import cvxdual as cd
-from cvxdual.eq.fields import StressField
 from cvxdual.files import write_text
 from cvxdual.geometry.mesh import PROBE_COLUMNS, build_mesh, mesh_size
-from cvxdual.geometry.outline_mesh import forget_meshes, gmsh_seconds, mesh_threads
+from cvxdual.geometry.outline import forget_meshes, gmsh_seconds, mesh_threads
 from cvxdual.geometry.triangulation import column_breaks
 from cvxdual.outputs.output_set import write_outputs
 from cvxdual.study.report import md_table
@@ -67,7 +66,7 @@ def kirsch_rows(levels) -> pd.DataFrame:
         sol = cd.solve("block-with-hole", level=level, solver="fast", stress_space="eq")
         r, eps = 0.5, 1e-7
         pts = np.array([[r + eps, -10.0], [-r - eps, -10.0], [0.0, -10.0 + r + eps], [0.0, -10.0 - r - eps]])
-        s, _ = StressField.of(sol).at(pts, np.ones(4, int))
+        s, _ = sol.field.at(pts, np.ones(4, int))
         b = sol.bounds
         rows.append({"part": "kirsch", "level": level, "pieces": len(sol.pieces),
                      "hoop_right": s[0, 1] / -100.0, "hoop_left": s[1, 1] / -100.0,

@@ -19,7 +19,7 @@ PKG = ROOT / "cvxdual"
 # pipeline -> outputs -> study -> cli. The two stress spaces share one layer: neither imports the other.
 LAYERS = [
     {"errors"},
-    {"validate", "voigt"},
+    {"validate", "voigt", "kinds", "records"},  # names of kinds; typed records (no package imports)
     {"files", "progress", "memory"},
     {"scene"},  # what the user describes
     {"reference"},  # closed forms a scene may declare

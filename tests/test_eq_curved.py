@@ -305,10 +305,10 @@ def test_field_distance_in_chunks_equals_one_pass(monkeypatch):
     """A level-6 reference is integrated in chunks of cells; the chunks must add up to the one-pass
     integral, with straddling cells refined in whichever chunk holds them (eq against eq, eq
     against P0 with slabs)."""
-    from cvxdual.eq import fields
-    a = fields.StressField.of(solved("cylinder-in-groove", "type2", 2))
-    b = fields.StressField.of(solved("cylinder-in-groove", "type2", 0))
-    c = fields.StressField.of(cd.solve("cylinder-in-groove", "type1", 0, "fast"))
+    from cvxdual.system import field as fields
+    a = solved("cylinder-in-groove", "type2", 2).field
+    b = solved("cylinder-in-groove", "type2", 0).field
+    c = cd.solve("cylinder-in-groove", "type1", 0, "fast").field
     for x, y in ((a, b), (a, c)):
         whole = fields.field_distance(x, y, 2, 6)
         monkeypatch.setattr(fields, "CHUNK_POINTS", 3000)  # dozens of chunks, most with straddling cells
@@ -323,8 +323,7 @@ def test_field_at_sub_triangle_centroids_is_the_vertex_mean():
     """``StressField.at`` finds the sub-triangle of a point from the macro triangle's barycentric
     coordinates: at every sub-triangle's centroid it must return the mean of that sub-triangle's
     vertex values, and name that sub-triangle as the cell."""
-    from cvxdual.eq import fields
-    f = fields.StressField.of(solved("cylinder-in-groove", "type1", 1))
+    f = solved("cylinder-in-groove", "type1", 1).field
     sub = f.space.sub_points()  # (n_sub, 3, 2)
     c = sub.mean(1)
     body = np.repeat(f.space.body, 3)

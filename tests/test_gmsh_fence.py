@@ -1,4 +1,4 @@
-"""gmsh behind its fence (cvxdual.geometry.gmsh_fence): it runs in a child process, so a crash,
+"""gmsh behind its fence (cvxdual.geometry.outline.fence): it runs in a child process, so a crash,
 a time-out, Ctrl-C or two threads cannot take the caller down or leave it a wrong mesh; the caller
 never imports gmsh and its own gmsh session is untouched; nothing is written under $HOME."""
 
@@ -15,14 +15,12 @@ import numpy as np
 import pytest
 
 import cvxdual as cd
-from cvxdual.geometry import gmsh_fence
 from cvxdual.geometry.mesh import build_mesh, column_abscissae
-from cvxdual.geometry.outline_mesh import forget_meshes
-from cvxdual.geometry.outline_sizes import strip_depth
+from cvxdual.geometry.outline import fence, forget_meshes, strip_depth
 
 ROOT = Path(__file__).resolve().parents[1]
 SLOW_LEVEL = 6  # block-with-hole: gmsh meshes for several seconds at this level
-FENCED = "cvxdual.geometry.outline_mesh:gmsh_mesh"
+FENCED = "cvxdual.geometry.outline.mesher:gmsh_mesh"
 
 
 def digest(mesh) -> str:
@@ -45,7 +43,7 @@ def children_of(pid: int) -> list[int]:
             argv = (p / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue
-        if b"cvxdual.geometry.gmsh_worker" in argv and str(pid).encode() in argv:
+        if b"cvxdual.geometry.outline.worker" in argv and str(pid).encode() in argv:
             out.append(int(p.name))
     return out
 
@@ -82,14 +80,14 @@ def test_a_killed_gmsh_is_one_error_and_the_next_mesh_is_right():
 
     def mesh():
         try:
-            gmsh_fence.in_gmsh(FENCED, *rest_request(scene, SLOW_LEVEL))
+            fence.in_gmsh(FENCED, *rest_request(scene, SLOW_LEVEL))
         except cd.CvxdualError as e:
             found.append(e)
 
     t = threading.Thread(target=mesh)
     t.start()
     time.sleep(1.0)  # the child is meshing by now (it takes several seconds at this level)
-    os.kill(gmsh_fence.pid(), signal.SIGKILL)
+    os.kill(fence.pid(), signal.SIGKILL)
     t.join(30)
     assert len(found) == 1 and isinstance(found[0], cd.MeshError), found
     msg = str(found[0])
@@ -106,19 +104,19 @@ def test_time_limit_ends_gmsh_within_its_margin():
     with pytest.raises(cd.TimeLimitError):
         cd.solve("block-with-hole", level=SLOW_LEVEL, solver="fast", time_limit=1.0)
     assert time.perf_counter() - t < 1.0 + 2.0
-    assert gmsh_fence.pid() is None
+    assert fence.pid() is None
 
 
 def test_two_threads_load_and_mesh_side_by_side():
     """Two threads loading a scene (one from a .geo file) and meshing it 20 times each (no cache:
     every call reaches gmsh): each gets the mesh a single caller gets, bit for bit."""
     sources = {"a": str(ROOT / "examples" / "block-with-hole-geo.toml"), "b": "rounded-punch"}
-    want = {k: gmsh_fence.in_gmsh(FENCED, *rest_request(cd.load_scene(s), 0)) for k, s in sources.items()}
+    want = {k: fence.in_gmsh(FENCED, *rest_request(cd.load_scene(s), 0)) for k, s in sources.items()}
     bad = []
 
     def work(key):
         for _ in range(20):
-            got = gmsh_fence.in_gmsh(FENCED, *rest_request(cd.load_scene(sources[key]), 0))
+            got = fence.in_gmsh(FENCED, *rest_request(cd.load_scene(sources[key]), 0))
             w = want[key]
             if not (np.array_equal(got.points, w.points) and np.array_equal(got.triangles, w.triangles)):
                 bad.append(key)
@@ -154,4 +152,4 @@ def test_ctrl_c_stops_the_command_while_gmsh_meshes():
 
 def test_only_the_packages_functions_run_in_the_child():
     with pytest.raises(ValueError, match="package's own functions"):
-        gmsh_fence.in_gmsh("os:system", "true")
+        fence.in_gmsh("os:system", "true")

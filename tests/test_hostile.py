@@ -220,7 +220,7 @@ def test_study_cache_that_cannot_hold_entries(tmp_path, monkeypatch, capsys):
 
 def test_running_out_of_memory_is_a_cvxdual_error(tmp_path, monkeypatch, capsys):
     """A MemoryError the estimate did not foresee (e.g. under a ulimit) is reported, not a traceback."""
-    import cvxdual.p0.run as run
+    import cvxdual.system.stress_space as run
 
     def exhausted(*args, **kwargs):
         raise MemoryError

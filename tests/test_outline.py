@@ -15,11 +15,9 @@ from helpers import GEO_SCENE, without_progress
 
 import cvxdual as cd
 from cvxdual.cli import main
-from cvxdual.eq.fields import StressField
 from cvxdual.errors import MeshError
-from cvxdual.geometry import gmsh_fence
 from cvxdual.geometry.mesh import build_mesh
-from cvxdual.geometry.outline_mesh import SMALL, forget_meshes
+from cvxdual.geometry.outline import SMALL, fence, forget_meshes
 from cvxdual.geometry.triangulation import discretize
 from cvxdual.scene import load_scene, parse_assignment
 from cvxdual.system.boundary import supports
@@ -93,7 +91,7 @@ def test_gmsh_time_is_reported_for_outline_scenes_only(patch_outline):
 def test_meshes_are_deterministic_across_processes_and_threads(patch_outline, tmp_path, scene, level):
     """Same input, same mesh: in a fresh process, on one gmsh thread or two (each body is cut in
     surfaces, meshed side by side; nodes and triangles are read surface by surface). The levels
-    give 65 columns: more than outline_mesh.SMALL, so two threads are used where allowed."""
+    give 65 columns: more than outline.SMALL, so two threads are used where allowed."""
     f = tmp_path / "p.toml"
     f.write_text(PATCH)
     source = str(f) if scene == "patch-outline" else scene
@@ -155,7 +153,7 @@ def _hoop(sol):
     """sigma_yy at the hole's sides and sigma_xx at its top and bottom, just inside the body."""
     r, eps = 0.5, 1e-7
     pts = np.array([[r + eps, -10.0], [-r - eps, -10.0], [0.0, -10.0 + r + eps], [0.0, -10.0 - r - eps]])
-    s, _ = StressField.of(sol).at(pts, np.ones(4, int))
+    s, _ = sol.field.at(pts, np.ones(4, int))
     return s[:2, 1], s[2:, 0]
 
 
@@ -221,14 +219,14 @@ def test_missing_gmsh_is_one_line(monkeypatch, tmp_path, patch_outline):
     raises the loader's error there); column scenes do not need gmsh at all."""
     (tmp_path / "gmsh.py").write_text('raise OSError("libGLU.so.1: cannot open shared object file: No such file")\n')
     monkeypatch.syspath_prepend(str(tmp_path))  # the fence hands the caller's path to gmsh's process
-    gmsh_fence.stop()  # a new process, which finds the stand-in
+    fence.stop()  # a new process, which finds the stand-in
     forget_meshes()  # a kept mesh would need no gmsh
     try:
         with pytest.raises(MeshError, match="libGLU.*apt-get install libglu1-mesa"):
             build_mesh(patch_outline, 0)
         build_mesh(load_scene("patch"), 0)  # a column scene needs no gmsh
     finally:
-        gmsh_fence.stop()  # the next process finds the real gmsh
+        fence.stop()  # the next process finds the real gmsh
 
 
 # -- malformed outlines: one line, exit 1, nothing written ---------------------------------------

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cvxdual.geometry.mesh import build_mesh, mesh_size
-from cvxdual.geometry.outline_sizes import OCTAVE, STEER, SizeField, clear_of, graded_stops, steering_points
+from cvxdual.geometry.outline.sizes import OCTAVE, STEER, SizeField, clear_of, graded_stops, steering_points
 from cvxdual.scene import load_scene
 from cvxdual.scene.planar import inside
 

@@ -1,6 +1,6 @@
 """A straight side split into two parts (to load or support part of it) meshes wherever the split
 lies: under a column of the face too (issue 39). gmsh's part of an outline body is cut into
-surfaces along vertical lines from the strip's nodes (cvxdual.geometry.outline_cut); a cut that
+surfaces along vertical lines from the strip's nodes (cvxdual.geometry.outline.cuts); a cut that
 ended a few ulps beside a split point (a column at x = -3.3e-15, the split at 0) gave gmsh two
 points there and the mesh a zero-area triangle at levels 2-5."""
 

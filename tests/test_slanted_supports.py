@@ -14,7 +14,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import cvxdual as cd
-from cvxdual.eq.fields import StressField
 from cvxdual.geometry.mesh import build_mesh
 from cvxdual.geometry.triangulation import discretize
 from cvxdual.scene import load_scene
@@ -326,7 +325,7 @@ def test_eq_traction_along_the_guides_is_zero(scenes):
 
     def traction(name):
         sol = cd.solve(scenes[name], level=2, stress_space="eq", solver="fast")
-        sig, _ = StressField.of(sol).at(pts, np.ones(len(pts), int))
+        sig, _ = sol.field.at(pts, np.ones(len(pts), int))
         t = np.stack([sig[:, 0] * n_out[0] + sig[:, 2] * n_out[1], sig[:, 2] * n_out[0] + sig[:, 1] * n_out[1]], 1)
         return t, np.abs(sig).max()
 

@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 
 from cvxdual import load_scene, solve
-from cvxdual.eq.fields import StressField, field_distance
 from cvxdual.errors import CvxdualError
 from cvxdual.p0.norms import stress_distance
+from cvxdual.system.field import field_distance
 
 REF = 3  # the reference level of (a): 5103 pieces of rounded-punch, solved in about a second
 
@@ -41,7 +41,7 @@ def test_common_part_on_an_outline_body_with_an_arc(punch):
     dropped = []
     for L in (0, 1, 2):
         p0 = stress_distance(ref, sol[L], 2, 6)
-        for d in (p0, field_distance(StressField.of(ref), StressField.of(sol[L]), 2, 6)):
+        for d in (p0, field_distance(ref.field, sol[L].field, 2, 6)):
             assert all(np.isfinite(d[k]) and d[k] > 0 for k in ("l2", "l2_rel", "energy", "energy_rel"))
             # each level's chords lie inside the last's (every edge halved), so the reference's mesh
             # holds the studied one and the two differ by the chords' segments of the coarse level
@@ -106,7 +106,7 @@ def test_a_column_scene_drops_nothing_and_keeps_its_errors():
     assert new["dropped_area"] == 0.0 and new["dropped_share"] == 0.0
     # no point is dropped: the same points, weights and sums in the same order, bit for bit
     assert {k: new[k] for k in old} == old
-    eq = field_distance(StressField.of(ref), StressField.of(solve(scene, "type1", 1, "fast", stress_space="eq")), 2, 6)
+    eq = field_distance(ref.field, solve(scene, "type1", 1, "fast", stress_space="eq").field, 2, 6)
     assert eq["dropped_area"] == 0.0 and np.isfinite(eq["l2_rel"])
 
 
@@ -121,7 +121,7 @@ def test_different_bodies_are_refused(name, override, level):
     a = solve(load_scene(name), "type2", level + 1, "fast")
     b = solve(load_scene(name, [override]), "type2", level, "fast")
     for dist in (lambda: stress_distance(a, b, 2, 6),
-                 lambda: field_distance(StressField.of(a), StressField.of(b), 2, 6)):
+                 lambda: field_distance(a.field, b.field, 2, 6)):
         with pytest.raises(CvxdualError, match="not meshes of one scene; compare solutions of the same scene") as e:
             dist()
         assert "\n" not in str(e.value)

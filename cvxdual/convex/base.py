@@ -19,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ModelError
+from ..kinds import Status
 from ..solution import SolverStats
 from . import cvxpy_internals as internals
 from .solvers import DEFAULT_SOLVER, TIME_LIMIT_OPTION, resolve_solver, solve_problem
@@ -65,7 +66,7 @@ class ConvexModel:
     :meth:`_own_changes`."""
 
     what = "convex problem"  # how messages name the problem
-    _accept = ("optimal",)  # solver statuses taken as solved (see solvers.solve_problem)
+    _accept = (Status.OPTIMAL,)  # solver statuses taken as solved (see solvers.solve_problem)
 
     def _start(self, limit_analysis: bool) -> None:
         self.limit_analysis = bool(limit_analysis)

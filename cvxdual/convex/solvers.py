@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 
 from ..errors import SolverError, TimeLimitError, UnknownSolverError
+from ..kinds import Status
 from ..solution import SolverStats
 from ..validate import one_line
 
@@ -78,7 +79,7 @@ def _other(solver: str) -> str:
 
 
 def solve_problem(problem, solver: str, what: str, advice: dict | None = None, time_limit: float | None = None,
-                  verbose: bool = False, run=None, accept: tuple = ("optimal",), defaults: dict | None = None,
+                  verbose: bool = False, run=None, accept: tuple = (Status.OPTIMAL,), defaults: dict | None = None,
                   **options) -> SolverStats:
     """Solve the ``cvxpy.Problem`` ``problem``; return its statistics, or raise :class:`SolverError`.
 

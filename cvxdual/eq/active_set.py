@@ -32,6 +32,7 @@ import scipy.sparse as sp
 
 from ..activeset.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active, worst_flipped
 from ..errors import MeshError, SolverError
+from ..kinds import Status
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
 from .balance import PROJECT_TOL, make_exact, rigid_motions
@@ -659,7 +660,7 @@ def solve_eq_fast(space: EquilibriumSpace, active: np.ndarray | None = None) -> 
     n_c = len(space.contact_y)
     st = hs.stats
     return y_exact, SolverStats(
-        solver="fast", status="optimal", iterations=st.iterations, solve_time=t1 - t0, backend=st.backend,
+        solver="fast", status=Status.OPTIMAL, iterations=st.iterations, solve_time=t1 - t0, backend=st.backend,
         factorizations=st.factorizations, factor_time=st.factor_time, setup_time=hs.setup_time,
         warm_start="coarse level" if warm else "given", warm_start_time=t_warm, active=state["active"].reshape(n_c, 2),
         corrections=corrections, post_time=t2 - t1, n_variables=space.n_y, n_equalities=6 * space.n_tri,

@@ -22,6 +22,7 @@ import scipy.sparse as sp
 from ..errors import SceneError
 from ..geometry.quadrature import gauss01, triangle_rule
 from ..linalg.sparse import assemble_blocks
+from ..records import BoundContributions, Bounds, DisplacementFix, ExactErrors
 from ..system.boundary import supports
 from ..voigt import VOIGT_WEIGHT
 from .columns import CONCAVE1, column_gap
@@ -214,14 +215,15 @@ def contact_slack(space: EquilibriumSpace, v: np.ndarray) -> tuple[np.ndarray, n
     return s, smin, True
 
 
-def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.ndarray, dict]:
+def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.ndarray, DisplacementFix]:
     """Make a displacement ``u (n_nodes, 2)`` of ``V_h`` pointwise admissible on the whole contact
     interval: ``[u]`` is linear between pairs, a convex gap lies *below* its chord, so
     ``[u] = eps`` at two pairs means ``[u] > eps`` in between. On every contact edge whose
     guaranteed minimum slack (:func:`contact_slack`) is below a margin the lower face nodes of the
     edge are lowered (the upper ones raised if the lower are supported) by the deficit; a node
     takes the larger shift of its two edges, and a type-1 tied node follows its face node, so the
-    result stays in ``V_h``. Supports are untouched, so it stays in ``V``."""
+    result stays in ``V_h``. Supports are untouched, so it stays in ``V``. Returns ``v`` and what
+    was done (:class:`~cvxdual.records.DisplacementFix`)."""
     v = np.array(u, float).reshape(-1, 2)
     _, smin, exact = contact_slack(space, v)
     sc = space.scales
@@ -245,10 +247,10 @@ def admissible_displacement(space: EquilibriumSpace, u: np.ndarray) -> tuple[np.
     dy[tied[:, 2]] = dy[tied[:, 1]]
     v[:, 1] += dy
     _, smin2, _ = contact_slack(space, v)
-    return v, {"max_shift": float(shift.max(initial=0.0)), "n_shifted": int(np.sum(shift > 0)),
-               "min_slack_before": float(smin.min()), "min_slack": float(smin2.min()), "exact_min": exact,
-               "support_violation": sup.violation(v),
-               "displacement_scale": float(np.abs(v).max(initial=0.0))}
+    return v, DisplacementFix(max_shift=float(shift.max(initial=0.0)), n_shifted=int(np.sum(shift > 0)),
+                              min_slack_before=float(smin.min()), min_slack=float(smin2.min()), exact_min=exact,
+                              support_violation=sup.violation(v),
+                              displacement_scale=float(np.abs(v).max(initial=0.0)))
 
 
 def strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
@@ -350,24 +352,26 @@ def _sub_energy(space: EquilibriumSpace, d: np.ndarray) -> np.ndarray:
 
 
 def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray,
-                     fix: bool = True, blocks: dict | None = None, g: np.ndarray | None = None) -> dict:
+                     fix: bool = True, blocks: dict | None = None, g: np.ndarray | None = None) -> Bounds:
     """Two-sided energy bounds and the error bound of the field of vertex values ``sigma``
     (``27 n_T`` numbers) and column values ``g`` ``(n_col, 2)`` (curved faces), and a displacement
     of ``V_h`` (made pointwise admissible first unless ``fix`` is false).
 
-    Returns ``energy_upper = J(v)``, ``energy_lower = -L(u0) - S(sigma)``, ``gap`` (``G`` as
-    the sum of its non-negative terms), ``gap_identity`` (``J(v) + L(u0) + S(sigma)``),
-    ``error_bound = sqrt(2 G)``, ``contributions`` (``element (n_T,)``, ``sub (n_T, 3)``,
-    ``column (n_slabs,)`` on the curved pieces' slabs, ``contact (n_c,)``, ``continuation`` on the
-    pieces beyond free arcs, :func:`continuation_energy`), ``data_oscillation``,
-    ``residuals``, ``guaranteed`` and ``reasons``. ``blocks``: :func:`constraint_blocks` or
-    :func:`edge_constraints` (the default).
+    Returns a :class:`~cvxdual.records.Bounds`: ``energy_upper = J(v)``, ``energy_lower =
+    -L(u0) - S(sigma)``, ``gap`` (``G`` as the sum of its non-negative terms), ``gap_identity``
+    (``J(v) + L(u0) + S(sigma)``), ``error_bound = sqrt(2 G)``, ``contributions`` (``element
+    (n_T,)``, ``sub (n_T, 3)``, ``column (n_slabs,)`` on the curved pieces' slabs, ``contact
+    (n_c,)``, ``continuation`` on the pieces beyond free arcs, :func:`continuation_energy`),
+    ``data_oscillation``, ``residuals``, ``displacement`` ``v`` and how it was fixed
+    (``displacement_fix``), ``guaranteed`` and ``reasons``. ``blocks``: :func:`constraint_blocks`
+    or :func:`edge_constraints` (the default).
     """
     blocks = edge_constraints(space) if blocks is None else blocks
     sig = np.asarray(sigma, float).reshape(space.n_tri, 3, 3, 3)
     g = np.zeros((0, 2)) if g is None else np.asarray(g, float).reshape(-1, 2)
     res = admissibility_residuals(space, sig, blocks, g)
-    v, fixinfo = admissible_displacement(space, displacement) if fix else (np.asarray(displacement, float), {})
+    v, fixinfo = (admissible_displacement(space, displacement) if fix
+                  else (np.asarray(displacement, float), DisplacementFix()))
     _, smin, exact_min = contact_slack(space, v)
     p = -contact_tractions(space, sig, blocks, g)
     stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
@@ -393,7 +397,7 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
         reasons.append("tractions not linear on edges: bounds hold for the projected data; "
                        f"data oscillation {osc:.3g} not included")
     # a slanted line's normal component of v = t s is rounding, not 0: held to the stress's tolerance
-    held = fixinfo.get("support_violation", 0.0) / max(fixinfo.get("displacement_scale", 0.0), 1e-300)
+    held = (fixinfo.support_violation or 0.0) / max(fixinfo.displacement_scale or 0.0, 1e-300)
     if held > ADMISSIBLE_TOL:
         reasons.append(f"v does not vanish on the supports (relative {held:.2g})")
     polygonal = space.mesh.polygonal_parts()
@@ -403,12 +407,12 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
     _, weight, body = space.mesh.continuation()
     if len(weight) and any(any(space.scene.bodies[k].body_force) for k in np.unique(body)):
         reasons.append("body force beyond the free arcs' polygons is not in L(v)")
-    return {"energy_upper": J, "energy_lower": -(comp + pe), "gap": G, "gap_identity": J + comp + pe,
-            "error_bound": float(np.sqrt(2.0 * max(G, 0.0))), "complementary_energy": comp,
-            "contributions": {"element": sub.sum(1), "sub": sub, "column": column, "contact": contact,
-                              "continuation": beyond},
-            "data_oscillation": osc, "residuals": res, "displacement": v, "displacement_fix": fixinfo,
-            "guaranteed": not reasons, "reasons": reasons}
+    return Bounds(energy_upper=J, energy_lower=-(comp + pe), gap=G, gap_identity=J + comp + pe,
+                  error_bound=float(np.sqrt(2.0 * max(G, 0.0))), complementary_energy=comp,
+                  contributions=BoundContributions(element=sub.sum(1), sub=sub, column=column, contact=contact,
+                                                   continuation=beyond),
+                  data_oscillation=osc, residuals=res, displacement=v, displacement_fix=fixinfo,
+                  guaranteed=not reasons, reasons=tuple(reasons))
 
 
 def data_oscillation(space: EquilibriumSpace) -> float:
@@ -428,8 +432,9 @@ def data_oscillation(space: EquilibriumSpace) -> float:
 # -- comparison with an exact field -----------------------------------------------
 
 def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray, exact, n: int = EQ_QUAD,
-                 g: np.ndarray | None = None) -> dict:
-    """Errors against an exact stress ``exact.stress(body, points)``: ``l2_rel`` of the field
+                 g: np.ndarray | None = None) -> ExactErrors:
+    """Errors (:class:`~cvxdual.records.ExactErrors`) against an exact stress
+    ``exact.stress(body, points)``: ``l2_rel`` of the field
     (vertex values ``sigma``, column values ``g``; ``||.||_0`` with ``s:s = s11^2 + s22^2 +
     2 s12^2``), ``stress_A = ||sigma - lam*||_A``, ``displacement_a = ||lam* - C e(v)||_A =
     ||u - v||_a`` (``lam* = C e(u)``), ``combined`` (the root sum of squares, which ``error_bound``
@@ -462,9 +467,9 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
         kin = np.einsum("sij,sj->si", _stiffness(space)[sbody], slab_strains(space, displacement)[si])
         _accumulate_errors(space, exact, sbody, sp_[:, None], field[:, None], kin[:, None], sw[:, None], acc)
     dd, rr, dAd, rAr, eAe, ee = acc
-    return {"l2": float(np.sqrt(dd)), "l2_rel": float(np.sqrt(dd / rr)), "stress_A": float(np.sqrt(dAd)),
-            "displacement_a": float(np.sqrt(eAe)), "combined": float(np.sqrt(dAd + eAe)),
-            "reference_A": float(np.sqrt(rAr)), "l2_rel_displacement": float(np.sqrt(ee / rr)), "rule": int(n)}
+    return ExactErrors(l2=float(np.sqrt(dd)), l2_rel=float(np.sqrt(dd / rr)), stress_A=float(np.sqrt(dAd)),
+                       displacement_a=float(np.sqrt(eAe)), combined=float(np.sqrt(dAd + eAe)),
+                       reference_A=float(np.sqrt(rAr)), l2_rel_displacement=float(np.sqrt(ee / rr)), rule=int(n))
 
 
 def _stiffness(space: EquilibriumSpace) -> np.ndarray:

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..records import Contact
 from ..solution import ACTIVE_TOL, FORCE_FLOOR, load_scale
 
 
-def edge_contact(system, p: np.ndarray, v: np.ndarray | None = None, load: float = 1.0) -> dict:
-    """Contact quantities of linear contact pressures ``p`` ``(n_c, 2)`` (at both ends of each
-    contact edge), defined as for P0 (:func:`cvxdual.solution.contact_quantities`): the nodal
+def edge_contact(system, p: np.ndarray, v: np.ndarray | None = None, load: float = 1.0) -> Contact:
+    """Contact quantities (:class:`~cvxdual.records.Contact`, with ``edge_pressure = p``) of linear
+    contact pressures ``p`` ``(n_c, 2)`` (at both ends of each contact edge), defined as for P0
+    (:func:`cvxdual.p0.checks.contact_quantities`): the nodal
     force ``int p phi_k dx`` at each pair and the pressure per tributary length; a pair is active
     where the pressure at it (from either adjacent edge) is positive beyond rounding of the load
     scale (``load`` times the scene's). ``v``: displacements for the relative displacement and
@@ -30,8 +32,8 @@ def edge_contact(system, p: np.ndarray, v: np.ndarray | None = None, load: float
     rel, slip = (np.zeros(n), np.zeros(n)) if v is None else (v[lo, 1] - v[up, 1], v[lo, 0] - v[up, 0])
     pressure = force / system.width
     xs = x[active]
-    return {"x": x, "gap": system.eps, "relative_displacement": rel, "force": force, "pressure": pressure,
-            "active": active, "edge_pressure": p, "tangential_force": np.zeros(n), "slip": slip,
-            "stick": np.zeros(n, bool), "n_active": int(active.sum()),
-            "x_min": float(xs.min()) if len(xs) else None, "x_max": float(xs.max()) if len(xs) else None,
-            "max_pressure": float(pressure.max(initial=0.0)), "total_force": float(force.sum())}
+    return Contact(x=x, gap=system.eps, relative_displacement=rel, force=force, pressure=pressure,
+                   active=active, edge_pressure=p, tangential_force=np.zeros(n), slip=slip,
+                   stick=np.zeros(n, bool), n_active=int(active.sum()),
+                   x_min=float(xs.min()) if len(xs) else None, x_max=float(xs.max()) if len(xs) else None,
+                   max_pressure=float(pressure.max(initial=0.0)), total_force=float(force.sum()))

@@ -21,10 +21,13 @@ import numpy as np
 
 from ..convex.base import USER_TOLERANCE, ConvexModel
 from ..errors import AccuracyError, ModelError
+from ..kinds import Status
+from ..records import Checks
 from ..solution import EQ_TOLERANCES, Solution, SolverStats, failed_checks
 from ..voigt import out_of_plane_factor
 from .balance import make_exact
 from .contact import edge_contact
+from .fields import EquilibriumField
 from .space import EquilibriumSpace
 
 
@@ -50,7 +53,7 @@ class EquilibriumModel(ConvexModel):
         self._start(limit_analysis)
         # limit analysis' degenerate optimum: Clarabel may stop short of its tolerances; the field
         # is made exact and checked anyway, and a load factor below the optimum is still a bound
-        self._accept = ("optimal", "optimal_inaccurate") if self.limit_analysis else ("optimal",)
+        self._accept = (Status.OPTIMAL, Status.OPTIMAL_INACCURATE) if self.limit_analysis else (Status.OPTIMAL,)
         self.space = space
         self.system = system  # the P0 system of the same mesh, for Solution (built on demand)
         sc = space.scales
@@ -177,13 +180,13 @@ class EquilibriumModel(ConvexModel):
         tri = space.triangulation
         system = self.system or assemble(*discretize(space.scene, tri, space.mesh.level))
         contact = edge_contact(system, -lf * self.y_exact[space.contact_y], None, lf)
-        sol = Solution(scene=space.scene, triangulation=tri, stress_space="eq", level=int(space.mesh.level),
-                       system=system, stress=sigma, displacement=np.zeros((space.mesh.n_nodes, 2)),
+        sol = Solution(scene=space.scene, triangulation=tri, level=int(space.mesh.level), system=system,
+                       field=EquilibriumField.of_space(space, sigma, g), displacement=np.zeros((space.mesh.n_nodes, 2)),
                        solver=self.info,
                        timings=self._timings(time.perf_counter() - t0),
                        objective=float("nan"), duality_gap=float("nan"), residuals={**applied, **res},
-                       contact=contact, exact=None, error=None, space=space, column_stress=g,
-                       checks={"applied": applied, "skipped": skipped})
+                       contact=contact, exact=None, error=None, space=space,
+                       checks=Checks(applied=applied, skipped=skipped))
         if check:
             tol = {**EQ_TOLERANCES, "user_constraints": USER_TOLERANCE}
             txt = failed_checks(applied, tol)

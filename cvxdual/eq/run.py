@@ -2,7 +2,8 @@
 fast path, the exactly admissible equilibrium stresses of the same mesh (the fast route of
 :mod:`cvxdual.eq.active_set` or the CVXPY model :class:`~cvxdual.eq.model.EquilibriumModel`), the
 certified bounds between the two and the errors against an exact field, as one
-:class:`~cvxdual.solution.Solution`. :func:`certify` adds the same bounds to a P0 solution.
+:class:`~cvxdual.solution.Solution` (:class:`EquilibriumStresses`, a
+:class:`~cvxdual.system.stress_space.StressSpace`). Its ``certify`` adds the same bounds to a P0 solution.
 """
 
 from __future__ import annotations
@@ -14,14 +15,13 @@ import numpy as np
 
 from ..convex.solvers import FAST, TIME_LIMIT_OPTION
 from ..errors import SolverError
-from ..geometry.triangulation import discretize
-from ..progress import Deadline, phase
+from ..kinds import Space
+from ..progress import phase
+from ..records import Bounds, CertifiedErrors, ExactErrors
 from ..reference.exact import exact_reference
-from ..scene import Scene
-from ..solution import Solution, SolverStats, check_solution, skipped_error
-from ..system.assembly import assemble
-from ..system.displacement import NOTHING_ACTS, nothing_acts, solve_fast
-from ..system.warm_start import warm_start_pairs
+from ..solution import Solution, SolverStats, skipped_error
+from ..system.kinematic import P1, KinematicSide
+from ..system.stress_space import Solved, StressSpace
 from .bounds import (
     certified_bounds,
     contact_slack,
@@ -30,6 +30,7 @@ from .bounds import (
     exact_errors,
 )
 from .contact import edge_contact
+from .fields import EquilibriumField
 from .space import EquilibriumSpace
 
 
@@ -50,72 +51,72 @@ def eq_stresses(space: EquilibriumSpace, solver: str, pairs: tuple | None = None
     return model.stresses(), model.column_stresses(), stats
 
 
-def certify(sol: Solution) -> Solution:
-    """``sol`` (a P0 solution on a flat-face scene) with the certified bounds of its displacement
-    against the equilibrium stresses of the same mesh (solved by the fast route whatever solved
-    ``sol``: the same QP, exact), the time added to its recovery."""
-    t0 = time.perf_counter()
-    space = EquilibriumSpace.from_pieces(sol.mesh, sol.pieces, sol.triangulation)
-    sigma, g, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
-    bounds = certified_bounds(space, sigma, sol.displacement, g=g)
-    dt = time.perf_counter() - t0
-    timings = {**sol.timings, "recover": sol.timings["recover"] + dt, "total": sol.timings["total"] + dt}
-    return replace(sol, bounds=bounds, space=space, timings=timings)
+class EquilibriumStresses(StressSpace):
+    """The equilibrium space: the P1 displacement of the fast path, then the exactly admissible
+    stresses of the same mesh (the fast route, or a CVXPY solver), certified bounds between them;
+    frictionless."""
 
+    name = Space.EQ
+    certifies = True
 
-def solve_eq(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True,
-             warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
-             **solver_options) -> Solution:
-    """The "eq" run (see :func:`cvxdual.solve`): the displacement of ``V_h`` from the fast path,
-    the equilibrium stresses on the same pieces (column stresses on the curved ones), the
-    certified bounds between them and the errors against an exact field."""
-    deadline = deadline or Deadline()
-    t0 = time.perf_counter()
-    with phase("mesh", deadline) as p:
-        system = assemble(*discretize(scene, triangulation, level))
-        p.detail = f"level {level}: {len(system.mesh.points)} nodes, {system.n_dofs} dofs of the P1 displacement"
-    t1 = time.perf_counter()
-    with phase("assemble", deadline) as p:
-        space = EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
-        p.detail = (f"equilibrium space: {space.n_y} stress unknowns on {3 * space.n_tri} sub-triangles"
-                    + (f" and {len(space.columns)} columns" if len(space.columns) else ""))
-    t2 = time.perf_counter()
-    if nothing_acts(system):  # zero stresses and displacements are the solution
-        u = np.zeros(system.n_dofs)
-        sigma, g = np.zeros((3 * space.n_tri, 3, 3)), np.zeros((len(space.columns), 2))
-        stats = SolverStats(solver=NOTHING_ACTS, status="optimal", iterations=0)
-    else:
+    def __init__(self, kinematic: KinematicSide | None = None):
+        self.kinematic = kinematic or P1()  # the displacement of the bounds' upper side
+
+    def build(self, system, triangulation: str) -> EquilibriumSpace:
+        return EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
+
+    def describe(self, system, space) -> str:
+        return (f"{system.n_dofs} dofs of the P1 displacement; equilibrium space: {space.n_y} stress unknowns on "
+                f"{3 * space.n_tri} sub-triangles" + (f" and {len(space.columns)} columns" if len(space.columns)
+                                                      else ""))
+
+    def default_solver(self, n_triangles: float) -> str:
+        return FAST  # the same QP exactly, ~20x sooner than Clarabel (punch-on-block, level 2)
+
+    def model(self, system, triangulation: str, limit_analysis: bool = False):
+        from .model import EquilibriumModel  # loads CVXPY: only for a model
+        return EquilibriumModel(self.build(system, triangulation), limit_analysis, system)
+
+    def exact_error(self, sol: Solution, exact, rule: int):
+        return error_summary(exact_errors(sol.space, sol.stress, sol.displacement, exact, n=rule, g=sol.column_stress),
+                             sol.bounds)
+
+    def zero(self, system, space):
+        return np.zeros((3 * space.n_tri, 3, 3)), np.zeros((len(space.columns), 2))
+
+    def solve(self, scene, triangulation, level, system, space, solver, warm_start, deadline, verbose,
+              solver_options) -> Solved:
         name = "fast path" if solver == FAST else solver
         with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({name})") as p:
-            try:
-                start = warm_start_pairs(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
-                u, p0_stats = solve_fast(system, start)
-                pairs = (system.mesh.pair_x, p0_stats.active)
-            except SolverError:
-                if solver == FAST:
-                    raise
-                from ..system.primal import (
-                    PrimalModel,  # the CVXPY path was asked for: the P1 displacement by CVXPY too
-                )
-                model = PrimalModel(system)
-                model.solve(solver, time_limit=deadline.remaining() if solver in TIME_LIMIT_OPTION else None)
-                u, pairs = model.displacements(), None
+            kin = self.kinematic.solve(scene, triangulation, level, system, solver, warm_start, deadline)
             if solver != FAST:
                 solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
                                   "verbose": verbose, **solver_options}
             try:
-                sigma, g, stats = eq_stresses(space, solver, pairs, **solver_options)
+                sigma, g, stats = eq_stresses(space, solver, kin.pairs, **solver_options)
             except SolverError as e:
                 raise sliver_error(space) or e from None
             p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
-    t3 = time.perf_counter()
-    with phase("recover", deadline) as p:
-        times = {"mesh": t1 - t0, "assemble": t2 - t1, "build": 0.0, "solve": t3 - t2}
-        sol = eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats, times)
-        p.detail = "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
-    if check:
-        check_solution(sol)
-    return sol
+        return Solved(sigma, kin.u, stats, g)
+
+    def recover(self, scene, triangulation, level, system, space, solved):
+        return eq_solution(scene, triangulation, level, system, space, solved.stress, solved.column, solved.u,
+                           solved.stats)
+
+    def recovered(self, sol) -> str:
+        return "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
+
+    def certify(self, sol: Solution) -> Solution:
+        """``sol`` (a P0 solution on a flat-face scene) with the certified bounds of its
+        displacement against the equilibrium stresses of the same mesh (solved by the fast route
+        whatever solved ``sol``: the same QP, exact), the time added to its recovery."""
+        t0 = time.perf_counter()
+        space = self.build(sol.system, sol.triangulation)
+        sigma, g, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
+        bounds = certified_bounds(space, sigma, sol.displacement, g=g)
+        dt = time.perf_counter() - t0
+        timings = {**sol.timings, "recover": sol.timings["recover"] + dt, "total": sol.timings["total"] + dt}
+        return replace(sol, bounds=bounds, space=space, timings=timings)
 
 
 # (longest edge)^2 / area of a triangle past which the equilibrium space's local systems lose the
@@ -140,19 +141,18 @@ def sliver_error(space: EquilibriumSpace) -> SolverError | None:
     return SolverError(f"{why}, or use stress_space='p0'", cli=f"{why}, or drop --stress-space eq", reason=why)
 
 
-def error_summary(e: dict, bounds: dict) -> dict:
+def error_summary(e: ExactErrors, bounds: Bounds) -> CertifiedErrors:
     """A solution's ``error`` entry from :func:`~cvxdual.eq.bounds.exact_errors` and its bounds."""
-    return {"l2": e["l2"], "l2_rel": e["l2_rel"], "energy": e["stress_A"],
-            "energy_rel": e["stress_A"] / e["reference_A"], "combined": e["combined"],
-            "displacement_energy": e["displacement_a"], "rule": e["rule"],
-            "effectivity": bounds["error_bound"] / e["combined"] if e["combined"] > 0 else None}
+    return CertifiedErrors(l2=e["l2"], l2_rel=e["l2_rel"], energy=e["stress_A"],
+                           energy_rel=e["stress_A"] / e["reference_A"], combined=e["combined"],
+                           displacement_energy=e["displacement_a"], rule=e["rule"],
+                           effectivity=bounds["error_bound"] / e["combined"] if e["combined"] > 0 else None)
 
 
-def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: SolverStats,
-                times: dict) -> Solution:
-    """The eq run's :class:`Solution`: bounds, residuals and errors of ``sigma``, ``g`` and ``u``;
-    ``times`` of the phases before (the recovery's and the total are added)."""
-    t3 = time.perf_counter()
+def eq_solution(scene, triangulation, level, system, space, sigma, g, u,
+                stats: SolverStats) -> tuple[Solution, float]:
+    """The eq run's :class:`Solution` (timings empty): bounds, residuals and errors of ``sigma``,
+    ``g`` and ``u``; and the seconds the error against an exact field took."""
     blocks = edge_constraints(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks, g=g)
     v = b["displacement"]
@@ -167,13 +167,12 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: 
     t_err = time.perf_counter()
     if exact is not None:
         error = error_summary(exact_errors(space, sigma, v, exact, g=g), b)
-    t4 = time.perf_counter()
-    t_err = t4 - t_err
+    t_err = time.perf_counter() - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
     contact = edge_contact(system, -contact_tractions(space, sigma, blocks, g), v)
-    return Solution(scene=scene, triangulation=triangulation, stress_space="eq", level=int(level), system=system,
-                    stress=sigma, displacement=v, solver=stats,
-                    timings={**times, "recover": t4 - t3, "error": t_err, "total": sum(times.values()) + t4 - t3},
+    return Solution(scene=scene, triangulation=triangulation, level=int(level), system=system,
+                    field=EquilibriumField.of_space(space, sigma, g), displacement=v, solver=stats,
+                    timings={},
                     objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res, contact=contact,
                     exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space,
-                    column_stress=g, checks=skipped_error(res, why))
+                    checks=skipped_error(res, why)), t_err

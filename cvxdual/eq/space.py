@@ -51,7 +51,7 @@ from ..system.assembly import Scales
 from ..system.boundary import sliding_normal
 from .balance import balance_loads, make_scales
 from .columns import FaceIntervals, check_column_data, column_energy, face_intervals, slab_interval
-from .edges import edge_ids, mesh_edges, outward_normals
+from .edges import MeshEdges, edge_ids, mesh_edges, outward_normals
 from .element import (
     MASS0,
     bary_gradients,
@@ -96,7 +96,7 @@ class EquilibriumSpace:
     piola: np.ndarray
     coef: np.ndarray
     dofs: np.ndarray
-    edges: dict
+    edges: MeshEdges
     Tm: sp.csr_matrix
     z_fix: np.ndarray
     kind: np.ndarray
@@ -464,7 +464,7 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     face_edge = edge_ids(edges, faces.left, faces.right, mesh.n_nodes)
     ng_local = edges["ng"][edges["id"]]  # (n_T, 3, 2)
     cl = classify(mesh, edges, X, exact_field(scene), faces, face_edge)
-    edges = {**edges, "axis": cl["axis"]}
+    edges = edges.replace(axis=cl["axis"])
     Q = piola(X)
     coef = tie_blocks(inverse2(edge_blocks(Q, ng_local, edges["axis"][edges["id"]])), edges, face_edge[cl["tied"]])
     kind = cl["kind"]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..records import CommonPart
 from .mesh import Mesh
 from .pieces import Pieces, slab_bound
 
@@ -169,7 +170,7 @@ def _part_distance(part, x: np.ndarray) -> np.ndarray:
     return best
 
 
-def common_part(mesh_a: Mesh, mesh_b: Mesh, dropped: float, area_a: float, area_b: float) -> dict:
+def common_part(mesh_a: Mesh, mesh_b: Mesh, dropped: float, area_a: float, area_b: float) -> CommonPart:
     """What an integral over the common part of two meshes of one scene leaves out: ``dropped``
     (the measure of the quadrature points of ``a`` that lie outside ``b``) and the part of ``b``
     outside ``a`` (``|B| - |A| + dropped``, from the pieces' areas ``area_a``, ``area_b``), in all
@@ -192,4 +193,4 @@ def common_part(mesh_a: Mesh, mesh_b: Mesh, dropped: float, area_a: float, area_
                            f"body), more than the {bound:.2g} the polygons standing for their curves can account for: "
                            "they are not meshes of one scene; compare solutions of the same scene (file, overrides "
                            "and units)")
-    return {"dropped_area": float(total), "dropped_share": float(share), "dropped_bound": float(bound)}
+    return CommonPart(dropped_area=float(total), dropped_share=float(share), dropped_bound=float(bound))

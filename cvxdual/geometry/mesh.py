@@ -27,8 +27,7 @@ from ..errors import MeshError
 from ..scene.scene import Body, Scene
 from ..validate import short
 from .mesh_check import check_body_mesh
-from .outline_mesh import RestMesh, held_parts, mesh_rest
-from .outline_sizes import strip_depth
+from .outline import RestMesh, held_parts, mesh_rest, strip_depth
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
 PROBE_COLUMNS = 32  # outline bodies are counted on a mesh of at most this many columns, scaled up (0.01-0.06 s)
@@ -157,7 +156,7 @@ class BodyMesh:
 
     An outline body has one layer of columns (the strip) whose inner side is at ``inner_y``
     instead of the far side, and gmsh's mesh of the rest (``rest``,
-    :mod:`~cvxdual.geometry.outline_mesh`); its nodes and triangles follow the strip's."""
+    :mod:`~cvxdual.geometry.outline`); its nodes and triangles follow the strip's."""
 
     body: Body
     offset: int
@@ -280,7 +279,7 @@ class Mesh:
 
     def continuation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where the bodies extend beyond the mesh (free arcs of outline bodies,
-        :func:`~cvxdual.geometry.outline_mesh.mesh_rest`): node triples ``(m, 3)`` whose P1
+        :func:`~cvxdual.geometry.outline.mesh_rest`): node triples ``(m, 3)`` whose P1
         interpolant continues the displacement there, the area each covers ``(m,)`` and its
         body ``(m,)``. Zero stress is admissible there; the displacement's energy is not zero."""
         out = [(bm.offset + bm.rest.virtual_nodes, bm.rest.virtual_weight, np.full(len(bm.rest.virtual_weight), k))

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import MeshError
 from ..scene.planar import inside, point_segment_distance
-from .outline_mesh import SPLINE_SAMPLES
+from .outline import SPLINE_SAMPLES
 
 ROUND = 1e-9  # of the body's size: the rounding the outline check allows (coordinates copied from the face)
 PROBES = 16  # chords across a hole whose midpoints are tried as points deep inside it
@@ -40,7 +40,7 @@ def _fail(who: str, what: str, at, fix: str = FIX):
 def check_body_mesh(body, points: np.ndarray, tris: np.ndarray, face_nodes: np.ndarray, parts: dict) -> None:
     """Raise :class:`MeshError` unless ``points``, ``tris`` (the body's own node numbers) mesh the
     outline body ``body`` (module docstring); ``face_nodes``: the face's nodes left to right,
-    ``parts``: every outline part's node chain (:class:`~cvxdual.geometry.outline_mesh.RestMesh`)."""
+    ``parts``: every outline part's node chain (:class:`~cvxdual.geometry.outline.RestMesh`)."""
     who, outline = f"body {body.name!r}", body.outline
     tol = ROUND * float(np.ptp(points, axis=0).max())
     tx, ty = points[:, 0][tris], points[:, 1][tris]

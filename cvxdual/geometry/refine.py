@@ -2,8 +2,8 @@
 ones, with the new node of chosen edges moved onto the true boundary and chosen edges left whole.
 
 An outline body's gmsh part at level ``L >= 1`` is gmsh's mesh at the sizes of level ``L - 1``
-refined once (:mod:`~cvxdual.geometry.outline_mesh`): the size field halves everywhere a level
-(:mod:`~cvxdual.geometry.outline_sizes`), so the refined mesh has the sizes of level ``L`` and
+refined once (:mod:`~cvxdual.geometry.outline`): the size field halves everywhere a level
+(:mod:`~cvxdual.geometry.outline.sizes`), so the refined mesh has the sizes of level ``L`` and
 gmsh makes a quarter of the triangles. A triangle with one edge left whole (the strip's sides,
 which the strip's own mesh does not split) is cut into three instead: the corner between the
 halved edges, and the rest along the shorter diagonal.

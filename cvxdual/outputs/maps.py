@@ -113,7 +113,7 @@ def stress_support(sol):
     (stress space ``p0``) or its :class:`~cvxdual.eq.space.EquilibriumSpace` (``eq``); the type
     :func:`stress_field` and :func:`draw_mesh` dispatch on. (A ``p0`` solution with bounds has a
     space too: the bounds', not its stresses'.)"""
-    return sol.space if sol.stress_space == "eq" else sol.pieces
+    return sol.field.support
 
 
 @singledispatch

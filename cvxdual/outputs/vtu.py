@@ -53,12 +53,15 @@ no ``s33``: its ``von_mises`` is NaN (the principal stresses are in-plane and al
 
 from __future__ import annotations
 
+from functools import singledispatch
 from pathlib import Path
 
 import numpy as np
 
+from ..eq.fields import EquilibriumField
 from ..geometry.locate import nearest_node_values
 from ..geometry.pieces import piece_outlines, slab_outlines
+from ..system.field import PieceField
 from ..voigt import body_factors, shear_stress, von_mises
 
 # uncompressed: zlib makes it 2.1x smaller at 7x the write time (hertz level 6, 5.9e5 pieces:
@@ -243,9 +246,23 @@ def _write_eq_vtu(sol, path) -> None:
 
 
 def write_vtu(sol, path: str | Path) -> None:
-    """``solution.vtu`` of ``sol``: the arrays of the module docstring."""
-    if sol.stress_space == "eq":
-        return _write_eq_vtu(sol, path)
+    """``solution.vtu`` of ``sol``: the arrays of the module docstring, by the kind of its stress field."""
+    _write_field(sol.field, sol, path)
+
+
+@singledispatch
+def _write_field(field, sol, path) -> None:
+    raise TypeError(f"no solution.vtu for a {type(field).__name__}")
+
+
+@_write_field.register(EquilibriumField)
+def _(field, sol, path) -> None:
+    _write_eq_vtu(sol, path)
+
+
+@_write_field.register(PieceField)
+def _(field, sol, path) -> None:
+    """P0: every straight piece a triangle cell, every curved one a polygon, values per cell."""
     p = sol.system.pieces
     pts = sol.mesh.points
     disp = sol.displacement

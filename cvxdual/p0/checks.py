@@ -8,9 +8,11 @@ contact quantities at the pairs. :func:`evaluate` gives every field of a
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
+from ..records import Contact
 from ..reference.exact import exact_reference
 from ..solution import ACTIVE_TOL, FORCE_FLOOR, SolverStats, load_scale, skipped_error
 from ..system.assembly import System
@@ -29,9 +31,10 @@ def admissibility(system: System, t: np.ndarray):
 
 
 def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=None, adhesion=None,
-                       displacements: bool = True) -> dict:
-    """Nodal contact forces, pressures, gaps, the active set and the tangential state, from
-    the residual ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``.
+                       displacements: bool = True) -> Contact:
+    """Nodal contact forces, pressures, gaps, the active set and the tangential state
+    (:class:`~cvxdual.records.Contact`, with the ``reaction`` on the upper body), from the
+    residual ``R = Z^T (E t - f)`` of the stresses and the displacements ``u``.
 
     ``friction`` (Tresca ``g`` per pair) and ``adhesion`` (``sigma_a`` per pair) are those of
     the problem solved: a pair is active where its force exceeds ``-sigma_a w`` and sticks
@@ -62,20 +65,20 @@ def contact_quantities(system: System, R: np.ndarray, u: np.ndarray, friction=No
         # without displacements, by the reserve alone (as the normal state by the force alone)
         stick = active & slides & (reserve > (np.abs(slip) / delta if displacements else ACTIVE_TOL))
     xs = system.mesh.pair_x[active]
-    return {
-        "x": system.mesh.pair_x, "gap": system.eps, "relative_displacement": rel,
-        "force": force, "pressure": pressure, "active": active,
-        "tangential_force": tangential, "slip": slip, "stick": stick,
-        "reaction": R[system.ja],  # y force on the upper body: +force (action = reaction)
-        "n_active": int(active.sum()),
-        "x_min": float(xs.min()) if len(xs) else None,
-        "x_max": float(xs.max()) if len(xs) else None,
-        "max_pressure": float(pressure.max()) if len(pressure) else 0.0,
-        "total_force": float(force.sum()),
-    }
+    return Contact(
+        x=system.mesh.pair_x, gap=system.eps, relative_displacement=rel,
+        force=force, pressure=pressure, active=active,
+        tangential_force=tangential, slip=slip, stick=stick,
+        reaction=R[system.ja],  # y force on the upper body: +force (action = reaction)
+        n_active=int(active.sum()),
+        x_min=float(xs.min()) if len(xs) else None,
+        x_max=float(xs.max()) if len(xs) else None,
+        max_pressure=float(pressure.max()) if len(pressure) else 0.0,
+        total_force=float(force.sum()),
+    )
 
 
-def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=None) -> dict:
+def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: Mapping, adm=None) -> dict:
     """Relative residuals of a dual solution ``t`` with recovered displacements ``u``.
 
     - equilibrium: largest violation of ``(T^T R)_j = 0`` (every ``j`` not in ``J-``, the
@@ -89,6 +92,11 @@ def residuals(system: System, t: np.ndarray, u: np.ndarray, contact: dict, adm=N
     Force denominators are floored (``F_ref = sum |f|``, the load scale: ``1e-6 F_ref`` for nodal
     forces, ``1e-3 F_ref`` for the total contact force) so that a solution with (almost) no
     contact is not judged on rounding noise.
+
+    A plain dict, not a record: ``Solution.residuals`` is a map from check names to values,
+    matched by name against ``TOLERANCES``; its names differ between the paths that build it (these
+    five here; a model's ``user_constraints`` and skipped checks, :mod:`cvxdual.p0.dual`; the eq
+    space's constraint blocks, an open set), and every reader iterates it or looks a name up.
     """
     R, scale = admissibility(system, t) if adm is None else adm
     f_ref = load_scale(system)
@@ -112,7 +120,7 @@ def _delta(system: System, u: np.ndarray, gap: np.ndarray) -> float:
     return max(float(np.abs(u).max()), float(np.abs(gap).max(initial=0.0)), system.scales.displacement)
 
 
-def complementarity(system: System, u: np.ndarray, contact: dict, force: np.ndarray | None = None) -> float:
+def complementarity(system: System, u: np.ndarray, contact: Mapping, force: np.ndarray | None = None) -> float:
     """``sum |F_k s_k| / (sum |F_k| delta)`` with the openings ``s_k``; ``force`` replaces
     ``contact["force"]`` (adhesion: the force above the cut-off)."""
     F = contact["force"] if force is None else force
@@ -121,7 +129,7 @@ def complementarity(system: System, u: np.ndarray, contact: dict, force: np.ndar
     return float(np.sum(np.abs(F * s)) / (fsum * _delta(system, u, contact["gap"])))
 
 
-def penetration(system: System, u: np.ndarray, contact: dict) -> float:
+def penetration(system: System, u: np.ndarray, contact: Mapping) -> float:
     """``max(0, -min_k s_k) / delta``."""
     s = contact["gap"] - contact["relative_displacement"]
     return float(max(0.0, -s.min()) / _delta(system, u, contact["gap"])) if len(s) else 0.0

@@ -31,8 +31,10 @@ import scipy.sparse as sp
 
 from ..convex.base import USER_TOLERANCE, ConvexModel
 from ..errors import AccuracyError, ModelError
+from ..records import Checks
 from ..solution import TOLERANCES, Solution, failed_checks, load_scale
 from ..system.assembly import System
+from ..system.field import PieceField
 from ..voigt import out_of_plane_factor
 from .checks import admissibility, complementarity, duality_gap, evaluate, penetration
 
@@ -304,9 +306,10 @@ class DualModel(ConvexModel):
             fields["error"] = None
         fields["residuals"] = applied
         fields["duality_gap"] = applied.get("duality_gap", float("nan"))
-        sol = Solution(triangulation=self.triangulation, stress_space="p0", level=int(s.mesh.level),
+        sol = Solution(triangulation=self.triangulation, level=int(s.mesh.level),
+                       field=PieceField.of_system(system, fields.pop("stress")),
                        timings=self._timings(time.perf_counter() - t0),
-                       checks={"applied": dict(applied), "skipped": skipped}, **fields)
+                       checks=Checks(applied=dict(applied), skipped=skipped), **fields)
         if check:
             tol = {**TOLERANCES, "user_constraints": USER_TOLERANCE}
             txt = failed_checks(applied, tol)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..records import ErrorNorms, FieldDistance
 from ..system.assembly import System
 from ..voigt import VOIGT_WEIGHT
 
@@ -27,16 +28,17 @@ def _accumulate(d: np.ndarray, r: np.ndarray, w: np.ndarray, A: np.ndarray, acc:
     acc[3] += w @ np.einsum("mi,ij,mj->m", r, A, r)
 
 
-def _result(acc: np.ndarray, n: int) -> dict:
+def _result(acc: np.ndarray, n: int) -> ErrorNorms:
     l2, ref_l2, en, ref_en = np.sqrt(acc)
-    return {"l2": float(l2), "l2_rel": float(l2 / ref_l2) if ref_l2 > 0 else float("nan"),
-            "energy": float(en), "energy_rel": float(en / ref_en) if ref_en > 0 else float("nan"),
-            "rule": int(n)}  # quadrature points per direction
+    return ErrorNorms(l2=float(l2), l2_rel=float(l2 / ref_l2) if ref_l2 > 0 else float("nan"),
+                      energy=float(en), energy_rel=float(en / ref_en) if ref_en > 0 else float("nan"),
+                      rule=int(n))  # quadrature points per direction
 
 
-def stress_error(system: System, t: np.ndarray, reference, n: int = DEFAULT_QUAD) -> dict:
-    """Errors of piecewise-constant stresses ``t`` ``(n_pieces, 3)`` against ``reference``,
-    which maps ``(body, points)`` to stresses (an exact field's ``stress`` method)."""
+def stress_error(system: System, t: np.ndarray, reference, n: int = DEFAULT_QUAD) -> ErrorNorms:
+    """Errors (:class:`~cvxdual.records.ErrorNorms`) of piecewise-constant stresses ``t``
+    ``(n_pieces, 3)`` against ``reference``, which maps ``(body, points)`` to stresses (an exact
+    field's ``stress`` method)."""
     pieces = system.pieces
     n_pieces = len(pieces)
     step = max(1, CHUNK_POINTS // (n * n))
@@ -61,7 +63,7 @@ def l2_norm(system: System, t: np.ndarray) -> float:
     return float(np.sqrt(np.sum(system.pieces.area * np.sum(VOIGT_WEIGHT * t**2, axis=1))))
 
 
-def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
+def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> FieldDistance:
     """``||lam_a - lam_b||`` (L2 and energy) between two solutions of the same scene on different
     meshes, integrated over the common part of ``a``'s pieces (``n*n`` points each) and ``b``'s,
     every point located in ``b``'s pieces; relative measures are against ``a``. Integrate over
@@ -100,7 +102,9 @@ def stress_distance(a, b, n: int = 2, n_fine: int | None = None) -> dict:
         if len(m):
             ta = a.stress[idx[m]]
             _accumulate(ta - b.stress[loc[m]], ta, w[m], bd.material.compliance, acc)
-    return {**_result(acc, n), **common_part(a.mesh, b.mesh, dropped, float(pa.area.sum()), float(b.pieces.area.sum()))}
+    # a dict: the norms and common_part's measures of the meshes' overlap, one row for a study
+    return FieldDistance(**_result(acc, n),
+                         **common_part(a.mesh, b.mesh, dropped, float(pa.area.sum()), float(b.pieces.area.sum())))
 
 
 def _locate_in(a, b, pts: np.ndarray, idx: np.ndarray) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""The paper's run in the P0 stress space: scene -> mesh and pieces -> assembly -> the CVXPY dual
-(:class:`~cvxdual.p0.dual.DualModel`) or its displacement form on the fast path
+"""The paper's run in the P0 stress space (:class:`P0Stresses`, a
+:class:`~cvxdual.system.stress_space.StressSpace`): scene -> mesh and pieces -> assembly -> the
+CVXPY dual (:class:`~cvxdual.p0.dual.DualModel`) or its displacement form on the fast path
 (:mod:`cvxdual.system.displacement`) -> a checked :class:`~cvxdual.solution.Solution`.
 
 The fast path starts from the active set of level ``L - 2`` (:func:`warm_start_pairs`, through
@@ -8,23 +9,22 @@ The fast path starts from the active set of level ``L - 2`` (:func:`warm_start_p
 
 from __future__ import annotations
 
-import logging
 import time
-from dataclasses import replace
 
 import numpy as np
 
-from ..convex.solvers import FAST, TIME_LIMIT_OPTION
-from ..geometry.triangulation import discretize
-from ..progress import Deadline, phase
-from ..scene import Scene
-from ..solution import Solution, SolverStats, check_solution
-from ..system.assembly import System, assemble
-from ..system.displacement import NOTHING_ACTS, nothing_acts, solve_fast
+from ..convex.solvers import FAST, TIME_LIMIT_OPTION, default_solver
+from ..kinds import Space
+from ..progress import phase
+from ..solution import Solution
+from ..system.assembly import System
+from ..system.displacement import solve_fast
+from ..system.field import PieceField
+from ..system.stress_space import Solved, StressSpace
 from ..system.warm_start import warm_start_pairs
 from .checks import evaluate
+from .norms import stress_error
 
-log = logging.getLogger(__name__)
 
 def dual_model(system: System, triangulation: str, limit_analysis: bool = False):
     """The :class:`~cvxdual.p0.dual.DualModel` of ``system`` with its scene's friction, if any."""
@@ -36,38 +36,46 @@ def dual_model(system: System, triangulation: str, limit_analysis: bool = False)
     return model
 
 
-def solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: bool = True,
-             warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
-             **solver_options) -> Solution:
-    """The P0 run (see :func:`cvxdual.solve`): the CVXPY dual with ``solver``, or the fast path
-    (``solver == "FAST"``) warm-started from level ``level - 2`` unless ``warm_start`` is false."""
-    deadline = deadline or Deadline()
-    t0 = time.perf_counter()
-    with phase("mesh", deadline) as p:
-        mesh, pieces, ties = discretize(scene, triangulation, level)
-        p.detail = f"{triangulation}, level {level}: {len(mesh.points)} nodes, {len(pieces.kind)} pieces"
-    t1 = time.perf_counter()
-    with phase("assemble", deadline) as p:
-        system = assemble(mesh, pieces, ties)
-        p.detail = f"{3 * system.n_pieces} stress unknowns, {system.n_dofs} dofs, {len(system.jb)} contact pairs"
-    t2 = time.perf_counter()
-    build = 0.0
-    if nothing_acts(system):
-        u = np.zeros(system.n_dofs)
-        t = np.zeros((system.n_pieces, 3))
-        stats = SolverStats(solver=NOTHING_ACTS, status="optimal", iterations=0)
-    elif solver == FAST:
-        with phase("solve", deadline, start=f"fast path on {system.n_r} displacement unknowns") as p:
-            active = warm_start_pairs(scene, triangulation, level, mesh.pair_x) if warm_start else None
-            t_warm = time.perf_counter() - t2
-            u, stats = solve_fast(system, active)
-            # the warm start is part of the fast path's work: counted in "solve"
-            stats = stats.replace(warm_start="coarse level" if warm_start else None, warm_start_time=t_warm,
-                                  solve_time=stats.solve_time + t_warm)
-            t = system.stresses_from_displacement(u)
-            p.detail = (f"fast path: active-set iterations {stats.iterations}, factorisations "
-                        f"{stats.factorizations} ({stats.backend}), of which the warm start {t_warm:.2f} s")
-    else:
+class P0Stresses(StressSpace):
+    """The paper's space: the CVXPY dual with a CVXPY solver, or the fast path (``FAST``) on its
+    displacement form, warm-started from level ``L - 2``; solves scenes with friction (CVXPY)."""
+
+    name = Space.P0
+    frictional = True
+
+    def build(self, system: System, triangulation: str):
+        return None
+
+    def describe(self, system: System, built) -> str:
+        return f"{3 * system.n_pieces} stress unknowns, {system.n_dofs} dofs, {len(system.jb)} contact pairs"
+
+    def default_solver(self, n_triangles: float) -> str:
+        return default_solver(n_triangles)
+
+    def model(self, system: System, triangulation: str, limit_analysis: bool = False):
+        return dual_model(system, triangulation, limit_analysis)
+
+    def exact_error(self, sol: Solution, exact, rule: int):
+        return stress_error(sol.system, sol.stress, exact.stress, rule)
+
+    def zero(self, system: System, built):
+        return np.zeros((system.n_pieces, 3)), None
+
+    def solve(self, scene, triangulation, level, system, built, solver, warm_start, deadline, verbose,
+              solver_options) -> Solved:
+        if solver == FAST:
+            with phase("solve", deadline, start=f"fast path on {system.n_r} displacement unknowns") as p:
+                t0 = time.perf_counter()
+                active = warm_start_pairs(scene, triangulation, level, system.mesh.pair_x) if warm_start else None
+                t_warm = time.perf_counter() - t0
+                u, stats = solve_fast(system, active)
+                # the warm start is part of the fast path's work: counted in "solve"
+                stats = stats.replace(warm_start="coarse level" if warm_start else None, warm_start_time=t_warm,
+                                      solve_time=stats.solve_time + t_warm)
+                p.detail = (f"fast path: active-set iterations {stats.iterations}, factorisations "
+                            f"{stats.factorizations} ({stats.backend}), of which the warm start {t_warm:.2f} s")
+            return Solved(system.stresses_from_displacement(u), u, stats)
+        t0 = time.perf_counter()
         with phase("build", deadline) as p:
             model = dual_model(system, triangulation)
             p.detail = "the CVXPY model; CVXPY compiles it at the start of the solve"
@@ -78,27 +86,13 @@ def solve_p0(scene: Scene, triangulation: str, level: int, solver: str, check: b
             p.detail = (f"{solver}: {stats.status}, iterations {stats.iterations}; of this time CVXPY's "
                         f"compile {stats.compile_time or 0.0:.2f} s, which the summary counts as build")
         # CVXPY canonicalises inside solve(); count that as building the problem
-        build = t_built - t2 + (stats.compile_time or 0.0)
-        if scene.friction is not None:  # the model's own rows and checks (docs/reformulate.md)
-            t3 = time.perf_counter()
-            with phase("recover", deadline) as p:
-                sol = model.solution(check=False)
-                p.detail = "displacements from the multipliers, residuals"
-            t4 = time.perf_counter()
-            sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t3 - t2 - build,
-                                        "recover": t4 - t3, "error": 0.0, "total": t4 - t0})
-            if check:
-                check_solution(sol)  # the checks the model applied, with advice for solve() and the CLI
-            return sol
-        t, u = model.stresses(), model.displacements()
-    t4 = time.perf_counter()
-    with phase("recover", deadline) as p:
-        fields = evaluate(system, t, u, stats)
-        p.detail = "residuals" + (", error against the exact field" if fields["error"] is not None else "")
-    t5 = time.perf_counter()
-    timings = {"mesh": t1 - t0, "assemble": t2 - t1, "build": build, "solve": t4 - t2 - build,
-               "recover": t5 - t4, "error": fields.pop("timings")["error"], "total": t5 - t0}
-    sol = Solution(triangulation=triangulation, stress_space="p0", level=int(level), timings=timings, **fields)
-    if check:
-        check_solution(sol)
-    return sol
+        build = t_built - t0 + (stats.compile_time or 0.0)
+        # with friction the model's own rows and checks (docs/reformulate.md)
+        own = model.solution(check=False) if scene.friction is not None else None
+        return Solved(model.stresses(), model.displacements(), stats, build_time=build, solution=own)
+
+    def recover(self, scene, triangulation, level, system, built, solved):
+        fields = evaluate(system, solved.stress, solved.u, solved.stats)
+        t_error = fields.pop("timings")["error"]
+        return Solution(triangulation=triangulation, level=int(level), timings={},
+                        field=PieceField.of_system(system, fields.pop("stress")), **fields), t_error

@@ -9,7 +9,7 @@ the parts (``on = "bottom"``).
 
 The paper only asks the contact arcs to be graphs with paired face nodes (its ``Omega'``,
 ``Omega''`` are any plane regions): the mesh keeps a strip of columns along the face and meshes
-the rest with gmsh (:mod:`cvxdual.geometry.outline_mesh`).
+the rest with gmsh (:mod:`cvxdual.geometry.outline`).
 
 Validation here is geometric and complete before any meshing: the path must close on the face,
 no two segments (face included) may cross, touch or be tangent except consecutive ones at their

@@ -23,13 +23,14 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import CvxdualError
+from ..kinds import Space, Status
 from ..sizing import peak_mb
+from ..system.field import PieceField, StressField, field_distance
 from ..validate import one_line
 from .cache import Cache, code_version, content_key, is_key
 from .spec import Case, Reference, StudyError, load_module
@@ -66,8 +67,8 @@ def _numbers_ok(row: dict) -> bool:
 def within_tolerances(residuals: dict, stress_space: str) -> bool:
     """Whether ``residuals`` (by name; a missing or ``None`` one fails) meet the tolerances every
     returned solution of ``stress_space`` promises."""
-    from ..solution import EQ_TOLERANCES, TOLERANCES
-    tol = EQ_TOLERANCES if stress_space == "eq" else TOLERANCES
+    from ..solution import SPACE_TOLERANCES
+    tol = SPACE_TOLERANCES[Space.parse(stress_space or Space.P0)]
     return all(residuals.get(k) is not None and residuals[k] <= v for k, v in tol.items())
 
 
@@ -91,7 +92,7 @@ def load_case_row(cache: Cache, key: str, case: Case) -> dict | None:
         return (_typed(row, ROW_TYPES) and _numbers_ok(row) and all(row.get(k) == base[k] for k in IDENTITY)
                 and _flag_holds(row)
                 and (case.reference.kind != "finer" or case.solver == "limit" or _typed(row, MEASURED))
-                and (not case.save_stress or case.stress_space != "p0"
+                and (not case.save_stress or Space.parse(case.stress_space) is not Space.P0
                      or (row.get("stress_key") == "s" + key
                          and load_saved_stress(cache, "s" + key, row["n_pieces"]) is not None)))
     return cache.get_row(key, check=ok)
@@ -162,24 +163,14 @@ def case_key(case: Case, scene_repr: str, hooks_hash: str = "") -> str:
     return "c" + content_key("case", scene_repr, c, hooks_hash, code_version())
 
 
-@dataclass
-class Field:
-    """A piecewise-constant stress field on a mesh (what :func:`cvxdual.p0.norms.stress_distance` needs)."""
-
-    scene: object
-    mesh: object
-    pieces: object
-    stress: np.ndarray
-
-
-_MEMO: dict = {}  # the last reference field this process loaded: {key: Field}
+_MEMO: dict = {}  # the last reference field this process loaded: {key: StressField}
 
 
 def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool = True,
-                    ensure_cached: bool = False) -> tuple[Field, bool]:
+                    ensure_cached: bool = False) -> tuple[StressField, bool]:
     """The fast-path (or ``ref.solver``) solution at ``level``, from the memo, the cache, or solved
-    (and then cached); ``(field, computed)``: a :class:`Field` (P0), or for an ``eq`` reference a
-    :class:`~cvxdual.eq.fields.StressField` with its certified relative energy bound in
+    (and then cached); ``(field, computed)``: a :class:`~cvxdual.system.field.PieceField` (P0), or for an
+    ``eq`` reference an :class:`~cvxdual.eq.fields.EquilibriumField` with its certified relative energy bound in
     ``bound``. With ``ensure_cached``, a field taken from the memo is written again if its cache
     entry does not load (other workers read it there)."""
     from .. import discretize, solve
@@ -194,8 +185,8 @@ def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool 
     # past the machine's memory is refused in one line here rather than killing two workers
     check_size(scene, level, ref.solver == "fast", ref.stress_space)
     mesh, pieces, _ = discretize(scene, ref.triangulation, level)
-    if ref.stress_space == "eq":
-        from ..eq.fields import StressField
+    if Space.parse(ref.stress_space) is Space.EQ:
+        from ..eq.fields import EquilibriumField
         from ..eq.space import EquilibriumSpace
         space = EquilibriumSpace.from_pieces(mesh, pieces, ref.triangulation)
         hit = load_eq_reference(cache, key, space.n_tri, len(space.columns))
@@ -207,7 +198,8 @@ def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool 
                    "bound": np.array([b["error_bound"] / np.sqrt(2.0 * b["complementary_energy"])])}
             _check_usable(hit["stress"], scene, ref, level)
             cache.put_arrays(key, **hit)
-        f = StressField(scene, mesh, pieces, hit["stress"], space, hit["column"], bound=float(hit["bound"][0]))
+        f = EquilibriumField(scene, mesh, pieces, hit["stress"], space=space, g=hit["column"],
+                             bound=float(hit["bound"][0]))
     else:
         stress = load_reference_stress(cache, key, len(pieces))
         computed = stress is None
@@ -216,7 +208,7 @@ def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool 
             stress = np.asarray(sol.stress, float)
             _check_usable(stress, scene, ref, level)
             cache.put_arrays(key, stress=stress)
-        f = Field(scene, mesh, pieces, stress)
+        f = PieceField(scene, mesh, pieces, stress)
     if keep:
         _MEMO.clear()
         _MEMO[key] = f
@@ -242,13 +234,11 @@ def _recache(cache: Cache, key: str, f) -> None:
 def distance(a, b, n: int, n_fine: int) -> dict:
     """``||a - b||`` over ``a``'s cells: :func:`cvxdual.p0.norms.stress_distance` between P0 fields
     (as it always was), :func:`cvxdual.eq.fields.field_distance` where either is an equilibrium field."""
-    from ..eq.fields import StressField, field_distance
     from ..p0.norms import stress_distance
-    if not any(isinstance(x, StressField) or getattr(x, "stress_space", "p0") == "eq" for x in (a, b)):
-        return stress_distance(a, b, n, n_fine)
-    as_field = [x if isinstance(x, StressField) else StressField.of(x) if hasattr(x, "stress_space")
-                else StressField(x.scene, x.mesh, x.pieces, x.stress) for x in (a, b)]
-    return field_distance(as_field[0], as_field[1], n, n_fine)
+    fa, fb = (x if isinstance(x, StressField) else x.field for x in (a, b))
+    if all(type(f) is PieceField and f.slab is None for f in (fa, fb)):
+        return stress_distance(fa, fb, n, n_fine)
+    return field_distance(fa, fb, n, n_fine)
 
 
 def reference_level_task(source: str, overrides: tuple, units, ref: Reference, level: int, cache_root: str) -> dict:
@@ -340,8 +330,7 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
     if case.solver == "limit":
         return _limit(case, scene)
     kw = dict(case.solver_options)
-    if case.stress_space != "p0":
-        kw["stress_space"] = case.stress_space
+    kw["stress_space"] = case.stress_space
     if dict(case.tags).get("timing") == "steady":
         # one-time library start-up first (imports, solver set-up), as the limit excludes its own
         from ..linalg.factor import start_up
@@ -408,8 +397,9 @@ def _certificate(sol) -> dict:
 
 def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:
     from .. import exact_reference
-    from ..p0.norms import stress_error
+    from ..pipeline import space_of
     m = dict(case.metrics)
+    space = space_of(sol.stress_space)
     out = {"error_l2": np.nan, "error_l2_rel": np.nan, "error_energy": np.nan, "error_energy_rel": np.nan,
            "error_l2_rel_finer_rule": np.nan, "reference_error_est": np.nan}
     if case.reference.kind == "finer":
@@ -422,27 +412,21 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
                 return out  # no exact field: nothing to measure (e.g. a stability case on blocks)
         if sol.error is not None and sol.error.get("rule") == m["rule"]:
             err = sol.error
-        elif sol.stress_space == "eq":  # the study's rule, per sub-triangle and slab
-            from ..eq.bounds import exact_errors
-            from ..eq.run import error_summary
-            err = error_summary(exact_errors(sol.space, sol.stress, sol.displacement, ex, n=m["rule"],
-                                             g=sol.column_stress), sol.bounds)
-        else:
-            err = stress_error(sol.system, sol.stress, ex.stress, m["rule"])
-        if sol.stress_space == "eq":
+        else:  # the study's rule (eq: per sub-triangle and slab)
+            err = space.exact_error(sol, ex, m["rule"])
+        if space.certifies:  # with the displacement's error: what the certificate bounds
             out.update(error_combined=err["combined"], effectivity=err["effectivity"])
         if case.check_rule:
-            out["error_l2_rel_finer_rule"] = stress_error(sol.system, sol.stress, ex.stress,
-                                                          m["check_rule"])["l2_rel"]
+            out["error_l2_rel_finer_rule"] = space.exact_error(sol, ex, m["check_rule"])["l2_rel"]
         out["reference_error_est"] = 0.0
-        if m["edge_share"] and getattr(ex, "hertz", None) is not None and sol.stress_space == "p0":
+        if m["edge_share"] and getattr(ex, "hertz", None) is not None and isinstance(sol.field, PieceField):
             out["edge_error_share"] = edge_share(sol, ex, m["rule"])
     elif ref.kind == "finer":
         if ref_info is None:
             raise StudyError("internal: a finer-level reference without its info")
         field, _ = reference_field(scene, ref, ref.level, cache)
         err = distance(field, sol, m["ref_rule"], m["ref_fine"])
-        if sol.stress_space == "eq":
+        if space.certifies:
             out.update(_combined(field, sol, err, m))
         if case.check_rule:
             out["error_l2_rel_finer_rule"] = distance(field, sol, m["ref_check_rule"], m["ref_check_fine"])["l2_rel"]
@@ -464,8 +448,8 @@ def _combined(field, sol, err: dict, m: dict) -> dict:
     """What the certificate bounds, measured against the reference ``lam*``: the combined error
     ``sqrt(||sigma - lam*||_A^2 + ||lam* - C e(v)||_A^2)`` (``= ||u - v||_a`` for the second term)
     of an equilibrium solution, and the effectivity ``sqrt(2G)`` over it."""
-    from ..eq.fields import StressField
-    kin = distance(field, StressField.kinematic(sol.space, sol.displacement), m["ref_rule"], m["ref_fine"])
+    from ..eq.fields import kinematic_field
+    kin = distance(field, kinematic_field(sol.space, sol.displacement), m["ref_rule"], m["ref_fine"])
     combined = float(np.hypot(err["energy"], kin["energy"]))
     return {"error_combined": combined,
             "effectivity": sol.bounds["error_bound"] / combined if combined > 0 else np.nan}
@@ -496,7 +480,7 @@ def _limit(case: Case, scene) -> dict:
     system = assemble(mesh, pieces, ties)
     t1 = time.perf_counter()
     lim = limit(system)
-    return {"status": "optimal", "n_pieces": int(system.n_pieces), "h": float(mesh.h), "t_setup": t1 - t0,
+    return {"status": Status.OPTIMAL, "n_pieces": int(system.n_pieces), "h": float(mesh.h), "t_setup": t1 - t0,
             **lim, "t_total": time.perf_counter() - t0, "error_l2": np.nan, "error_l2_rel": np.nan}
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ..files import atomic_path, write_text
+from ..kinds import Space
 from .cases import IDENTITY
 
 LINE_KEYS = ("triangulation", "stress_space", "overrides", "solver", "units", "case")
@@ -271,7 +272,7 @@ def setup_lines(df: pd.DataFrame, refs: dict) -> list[str]:
             how = "no reference"
         elif label in refs:
             r = refs[label]
-            eq = r.get("stress_space") == "eq"
+            eq = Space.parse(r.get("stress_space") or Space.P0) is Space.EQ
             how = (f"against a reference: {r['triangulation'].replace('type', 'type ')}, level {r['level']} "
                    f"({r['n_pieces']} pieces), " + ("equilibrium stresses, " if eq else "")
                    + f"{'fast path' if r.get('solver') == 'fast' else r.get('solver')}, "

@@ -44,7 +44,7 @@ from pathlib import Path
 
 from ..errors import CvxdualError
 from ..geometry.triangulation import TRIANGULATIONS
-from ..pipeline import STRESS_SPACES
+from ..kinds import SPACE_NAMES, Space
 from ..validate import file_stem
 
 PSEUDO_SOLVERS = ("fast", "limit")
@@ -75,7 +75,8 @@ class Reference:
     def label(self) -> str:
         if self.kind != "finer":
             return self.kind
-        return f"{self.triangulation} level {self.level}" + (" eq" if self.stress_space == "eq" else "")
+        eq = Space.parse(self.stress_space) is Space.EQ
+        return f"{self.triangulation} level {self.level}" + (" eq" if eq else "")
 
 
 @dataclass(frozen=True)
@@ -316,7 +317,8 @@ def load_spec(source, quick: bool = False) -> Study:
                              "compare = [\"CLARABEL\", \"fast\"]")
         compare = tuple(_solver(s) for s in compare)
         # the P0 stresses of two paths are compared; eq rows (one path) are left out
-        cases = [_with(c, save_stress=True) if c.solver in compare and c.stress_space == "p0" else c for c in cases]
+        cases = [_with(c, save_stress=True) if c.solver in compare and Space.parse(c.stress_space) is Space.P0 else c
+                 for c in cases]
     return Study(name=name, title=raw.get("title", name), description=raw.get("description", ""), cases=cases,
                  path=path, quick=quick, raw=raw, hooks_path=hooks_path, measure=measure,
                  report_hook=getattr(mod, "report", None) if mod is not None else None, compare=compare,
@@ -358,9 +360,9 @@ def _reference(v, levels: list[int], where: str) -> Reference:
         if tri not in TRIANGULATIONS:
             raise StudyError(f"study spec {where}: reference triangulation {tri!r}; use type1 or type2")
         space = v.get("stress_space", "p0")
-        if space not in STRESS_SPACES:
+        if space not in SPACE_NAMES:
             raise StudyError(f"study spec {where}: reference stress space {space!r}; use one of "
-                             f"{', '.join(STRESS_SPACES)}")
+                             f"{', '.join(SPACE_NAMES)}")
         return Reference("finer", level, tri, _solver(v.get("solver", "fast")), space)
     raise StudyError(f"study spec {where}: reference must be \"exact\", \"none\" or a table {{level = N}}")
 
@@ -377,8 +379,8 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             raise StudyError(f"study spec {w}: unknown triangulation {t!r}; use type1 or type2")
     spaces = _list(d.get("stress_spaces", ["p0"]), "stress_spaces", w)
     for s in spaces:
-        if s not in STRESS_SPACES:
-            raise StudyError(f"study spec {w}: unknown stress space {s!r}; use one of {', '.join(STRESS_SPACES)}")
+        if s not in SPACE_NAMES:
+            raise StudyError(f"study spec {w}: unknown stress space {s!r}; use one of {', '.join(SPACE_NAMES)}")
     solvers = [_solver(s) for s in _list(d.get("solvers", ["CLARABEL"]), "solvers", w)]
     metrics = {**METRIC_DEFAULTS, **(d.get("metrics") or {})}
     bad = set(metrics) - set(METRIC_DEFAULTS)
@@ -426,7 +428,7 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             over = tuple(fixed) + tuple(combo)
             for tri, space, solver in itertools.product(tris, spaces, solvers):
                 for level in levels:
-                    check_rule = space == "p0" and (metrics["check"] == "all"
+                    check_rule = Space.parse(space) is Space.P0 and (metrics["check"] == "all"
                                                     or (metrics["check"] == "finest" and level == max(levels)))
                     out.append(Case(
                         study=study, name=str(d.get("name", "")), group=str(d.get("group", "")),

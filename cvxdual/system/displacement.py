@@ -27,6 +27,7 @@ import scipy.sparse as sp
 
 from ..activeset.core import ActiveSetStats, cover, iterate, worst_flipped
 from ..errors import SolverError
+from ..kinds import Status
 from ..linalg.factor import SPDFactor, backends, one_blas_thread, start_up
 from ..linalg.sparse import assemble_lower
 from ..solution import SolverStats
@@ -293,7 +294,7 @@ def solve_fast(system: System, active: np.ndarray | None = None) -> tuple[np.nda
         r, A = solver.solve(active)
     st = solver.stats
     return system.Z @ r, SolverStats(
-        solver="fast", status="optimal", iterations=st.iterations, solve_time=time.perf_counter() - t0,
+        solver="fast", status=Status.OPTIMAL, iterations=st.iterations, solve_time=time.perf_counter() - t0,
         backend=st.backend, factorizations=st.factorizations, factor_time=st.factor_time,
         schur_updates=st.schur_updates, max_update=st.max_update, refinements=st.refinements, active=A)
 

@@ -161,7 +161,7 @@ def _meshing(case, sol) -> dict:
     from pathlib import Path
 
     from cvxdual import solve
-    from cvxdual.geometry.outline_mesh import forget_meshes, gmsh_seconds
+    from cvxdual.geometry.outline import forget_meshes, gmsh_seconds
     from cvxdual.outputs.output_set import write_outputs
     out, before = {}, os.environ.get("OMP_NUM_THREADS")
     try:

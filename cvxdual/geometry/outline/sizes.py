@@ -1,18 +1,17 @@
 """Element sizes of an outline body's gmsh part, and the points that make gmsh follow them.
-
 :class:`SizeField` is the size asked at a point: the strip's inner chain (each node's column
 spacing) and every arc's vertices are its sources, and the size grows by :data:`GROWTH` times
-the distance from them, up to twice the coarsest column spacing. gmsh, though, only reads sizes
-at its geometry points and interpolates them linearly: along a line between its two ends, and
-inside a surface over a triangulation of the boundary's points. Round a small hole far from
-everything else that interpolation spans the whole surface, and the hole's fine size reaches
-far out (at level 5 of ``block-with-hole``, sizes grew a quarter as fast as asked and the hole's
-surfaces held two thirds of the body's triangles). So the size field is handed to gmsh at a few
-more points, about :data:`STEER` sizes apart, where it varies: along the lines cut through the
-body (:func:`graded_stops`) and on rings round each arc, embedded in the surfaces
+the distance from them, up to twice the coarsest column spacing; every size halves a level, so
+``--level`` halves the mesh everywhere. gmsh, though, only reads sizes at its geometry points and
+interpolates them linearly: along a line between its two ends, and inside a surface over a
+triangulation of the boundary's points. Round a small hole far from everything else that
+interpolation spans the whole surface, and the hole's fine size reaches far out (at level 5 of
+``block-with-hole``, sizes grew a quarter as fast as asked and the hole's surfaces held two
+thirds of the body's triangles). So the size field is handed to gmsh at a few more points, about
+:data:`STEER` sizes apart, where it varies: along the lines cut through the body
+(:func:`graded_stops`) and on rings round each arc, embedded in the surfaces
 (:func:`steering_points`). Background size fields do this too, but cost gmsh 25-35 us a
-triangle against its 6-9 (measured, reports/outlines.md).
-"""
+triangle against its 6-9 (measured, reports/outlines.md)."""
 
 from __future__ import annotations
 
@@ -22,7 +21,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..scene.planar import inside
+from ...scene.planar import inside
 
 GROWTH = 0.4  # at level 0 the size grows by 0.4 times the distance from a source; halved a level
 STRIP_ASPECT = 1.0  # strip depth over the local column spacing: square cells

@@ -1,18 +1,14 @@
-"""Where the rest of an outline body is cut into surfaces, which gmsh meshes side by side.
-
-gmsh's frontal algorithm meshes one surface on one thread and costs more a triangle the larger
-the surface (8.6 us a triangle for one surface of 9e4 uniform triangles, 5.7 us at 2e4): cut in
-up to eight surfaces, on two threads, a body meshes 2.5-3.5 times faster. A cut leaves the
-strip's inner chain at a node and runs away from the face: straight to the outline, or, when a
-hole is in the way, to the hole's nearest vertex, round the hole (each side keeps one half of it)
-and on from its far vertex. It ends inside a straight, splittable part of the outer loop (not a
-strip edge, not an arc's polygon), crosses nothing and keeps half an element size clear of every
-other outline vertex; cuts are tried from eight evenly spaced chain nodes, and a body no cut fits
-stays one surface.
-
-Curves come as ``(polyline, splittable)``: a line's two ends, an arc's samples. Pure geometry:
-:mod:`cvxdual.geometry.outline_mesh` builds the gmsh loops from a :class:`Cut`.
-"""
+"""Where the rest of an outline body is cut into surfaces, which gmsh meshes side by side. gmsh's
+frontal algorithm meshes one surface on one thread and costs more a triangle the larger the
+surface (8.6 us a triangle for one surface of 9e4 uniform triangles, 5.7 us at 2e4): cut in up to
+eight surfaces, on two threads, a body meshes 2.5-3.5 times faster. A cut leaves the strip's
+inner chain at a node and runs away from the face: straight to the outline, or, when a hole is in
+the way, to the hole's nearest vertex, round the hole (each side keeps one half of it) and on
+from its far vertex. It ends inside a straight, splittable part of the outer loop (not a strip
+edge, not an arc's polygon), crosses nothing and keeps half an element size clear of every other
+outline vertex; cuts are tried from eight evenly spaced chain nodes, and a body no cut fits stays
+one surface. Curves come as ``(polyline, splittable)``: a line's two ends, an arc's samples. Pure
+geometry: :mod:`~cvxdual.geometry.outline.regions` builds the gmsh loops from a :class:`Cut`."""
 
 from __future__ import annotations
 
@@ -21,7 +17,7 @@ from itertools import pairwise
 
 import numpy as np
 
-from ..scene.planar import inside, segments_meet
+from ...scene.planar import inside, segments_meet
 
 PIECES = 8  # surfaces a body is cut into at most: cuts tried at chain fractions 1/8 .. 7/8
 

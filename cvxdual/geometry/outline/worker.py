@@ -1,11 +1,9 @@
-"""The gmsh child (:mod:`cvxdual.geometry.gmsh_fence`): ``python -m cvxdual.geometry.gmsh_worker PPID``.
-
-It reads requests ``(function, args, OMP_NUM_THREADS)`` from stdin and writes each answer to
-stdout (a length, then a pickle: ``("ok", result)`` or ``("error", (class, message))``). Before
+"""The gmsh child (:mod:`cvxdual.geometry.outline.fence`): ``python -m cvxdual.geometry.outline.worker
+PPID``. It reads requests ``(function, args, OMP_NUM_THREADS)`` from stdin and writes each answer
+to stdout (a length, then a pickle: ``("ok", result)`` or ``("error", (class, message))``). Before
 anything else it caps its address space, ignores Ctrl-C (the parent handles it and kills the
 child), moves its own stdout out of gmsh's reach (gmsh prints from C) and watches its parent:
-when the parent is gone, it ends.
-"""
+when the parent is gone, it ends."""
 
 from __future__ import annotations
 
@@ -20,7 +18,7 @@ import sys
 import threading
 import time
 
-from ..errors import MeshError
+from ...errors import MeshError
 
 HEADER = struct.Struct("<Q")
 SLACK = 1 << 30  # address space beyond the free memory: libraries and thread stacks are mapped, not used
@@ -49,7 +47,7 @@ def import_gmsh():
 
 
 def _cap_memory() -> None:
-    from ..memory import available_memory
+    from ...memory import available_memory
 
     free = available_memory()
     if free == float("inf"):

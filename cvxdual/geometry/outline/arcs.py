@@ -1,26 +1,29 @@
 """Curved parts of an outline body's mesh: a free arc's exact polygon and the pieces beyond it
 (section 9 of docs/theory.md), a gmsh arc for a loaded or supported one, finding mesh nodes by
 their coordinates (how gmsh's nodes are matched to the points cvxdual placed), and whether the
-polygons that stand for the curves still bound one region (:func:`first_clash`).
-
-A valid outline's curves keep clear of each other, but their polygons need not: a free arc's
-chords cut inside it (``r (1 - cos(d / 2))`` deep), a hole's tangent polygon reaches outside its
-circle, a spline's chords cut its bends, and at level ``L >= 1`` gmsh gets every other vertex of
-each (four times as deep). A part closer to such a curve than that (a small hole by a rounded
-corner) crosses the polygon, or lies beyond it: gmsh then leaves a surface empty or fills a hole,
-and the refined mesh misses edges of the curves. :func:`first_clash` finds such a pair before
-gmsh runs: at level ``L``'s polygons the body is refused (:func:`clash_message`), at gmsh's
-coarser ones it is meshed at level ``L`` directly (:mod:`~cvxdual.geometry.outline_mesh`)."""
+polygons that stand for the curves still bound one region (:func:`first_clash`). A valid
+outline's curves keep clear of each other, but their polygons need not: a free arc's chords cut
+inside it (``r (1 - cos(d / 2))`` deep), a hole's tangent polygon reaches outside its circle, a
+spline's chords cut its bends, and at level ``L >= 1`` gmsh gets every other vertex of each (four
+times as deep). A part closer to such a curve than that (a small hole by a rounded corner)
+crosses the polygon, or lies beyond it: gmsh then leaves a surface empty or fills a hole, and the
+refined mesh misses edges of the curves. :func:`first_clash` finds such a pair before gmsh runs:
+at level ``L``'s polygons the body is refused (:func:`clash_message`), at gmsh's coarser ones it
+is meshed at level ``L`` directly (:mod:`~cvxdual.geometry.outline.loops`)."""
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..scene.planar import inside, meeting_pairs, point_segment_distance
-from .outline_sizes import arc_edges, arc_size
-from .triangles import doubled_areas, edge_keys
+from ...scene.planar import inside, meeting_pairs, point_segment_distance
+from ..triangles import doubled_areas, edge_keys
+from .sizes import arc_edges, arc_size
+
+if TYPE_CHECKING:
+    from .build import OutlineBuild
 
 CLASH_SAMPLES = 256  # points per curved segment when measuring how far a polygon strays from its curve
 
@@ -35,18 +38,19 @@ def match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(bv[order][pos] == av, order[pos], -1)
 
 
-def free_arc(s, concave, level, step, point, line, polyline, virtual) -> list[int]:
+def free_arc(s, concave, build: OutlineBuild) -> list[int]:
     """A traction-free arc as a polygon inside the body (section 9 of docs/theory.md): chords of
     a convex arc, or, round a concave one (a hole), the tangents at the chords' ends. The pieces of
     the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
-    displacement continues there as a P1 function, recorded in ``virtual`` for the energy bound:
-    the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
+    displacement continues there as a P1 function, recorded in ``build.virtual`` for the energy
+    bound: the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
     ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``). The polygon
-    is the one of ``level``; meshed at the level below (``step`` 2), gmsh gets every other vertex
-    of it and refinement places the rest."""
+    is the one of ``build.level``; meshed at the level below (``build.step`` 2), gmsh gets every
+    other vertex of it and refinement places the rest."""
+    step, virtual = build.step, build.virtual
     a0, sweep = s.angles()
     r = math.dist(s.start, s.center)
-    n = arc_edges(s, level)
+    n = arc_edges(s, build.level)
     d = sweep / n
     t = a0 + d * np.arange(n + 1)
     c = np.array(s.center)
@@ -60,17 +64,17 @@ def free_arc(s, concave, level, step, point, line, polyline, virtual) -> list[in
         for j in range(n):
             virtual["segment"].append((on[j], on[j + 1]))
             virtual["segment_area"].append(seg_area)
-        return polyline(np.array(on), lc)
+        return build.polyline(np.array(on), lc)
     rv = r / math.cos(0.5 * d)
     corners = [tuple(c + rv * np.array([math.cos(q + 0.5 * d), math.sin(q + 0.5 * d)])) for q in t[:-1]]
     virtual["corner"] += [(on[j], corners[j], on[j + 1]) for j in range(n)]
-    ids = [point(q, lc) for q in on]
+    ids = [build.point(q, lc) for q in on]
     if step > 1:  # gmsh meshes the chords; refinement puts the corners on them
-        return [line(ids[j], ids[j + 1], keep=True, mid=corners[j]) for j in range(n)]
+        return [build.line(ids[j], ids[j + 1], keep=True, mid=corners[j]) for j in range(n)]
     curves = []
     for j in range(n):
-        v = point(corners[j], lc)
-        curves += [line(ids[j], v, keep=True), line(v, ids[j + 1], keep=True)]
+        v = build.point(corners[j], lc)
+        curves += [build.line(ids[j], v, keep=True), build.line(v, ids[j + 1], keep=True)]
     return curves
 
 
@@ -94,12 +98,13 @@ def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarra
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
 
 
-def gmsh_arc(geo, point, s, level, size) -> int:
-    lc = arc_size(s, level)
-    a = point(s.start, min(size(s.start), lc))
-    b = point(s.end, min(size(s.end), lc))
-    c = point(s.center, lc)
-    return geo.addCircleArc(a, c, b)
+def gmsh_arc(build: OutlineBuild, s) -> int:
+    """gmsh's circle arc through segment ``s``, its ends at most the arc's size of gmsh's level."""
+    lc = arc_size(s, build.glevel)
+    a = build.point(s.start, min(build.size(s.start), lc))
+    b = build.point(s.end, min(build.size(s.end), lc))
+    c = build.point(s.center, lc)
+    return build.geo.addCircleArc(a, c, b)
 
 
 def first_clash(rings: list, owners: list) -> tuple | None:
@@ -137,32 +142,14 @@ def first_clash(rings: list, owners: list) -> tuple | None:
     return None
 
 
-def clash_message(body, level: int, a, b, polygon, strip: np.ndarray) -> str:
+def clash_message(body, level: int, a, b, polygons: dict, strip: np.ndarray) -> str:
     """One line refusing ``body`` at ``level``: the polygons standing for parts ``a`` and ``b``
-    (``polygon(name)``: its points) cross, though the parts themselves do not; how far apart to
+    (``polygons[name]``: its points) cross, though the parts themselves do not; how far apart to
     move them, and the level at which their polygons keep clear (their strays from the curves
     quarter a level), if that is at most four levels up. ``None`` is the strip, whose inner chain
     ``strip`` stands for itself."""
-    def curve(name):  # the part itself: dense samples of its curves
-        if name is None:
-            return strip
-        return np.concatenate([s.sample(CLASH_SAMPLES) if s.is_arc else np.array([s.start, s.end]) if not s.is_spline
-                               else s.sample(max(4, CLASH_SAMPLES // (len(s.through) + 1)))
-                               for s in body.outline.part(name).segments])
-
-    def what(name):
-        if name is None:
-            return "the strip of columns along the face"
-        return f"{'hole' if name in {h.name for h in body.outline.holes} else 'outline part'} {name!r}"
-
-    def stray(name):  # how far the polygon strays from the part: at its vertices and edge midpoints
-        if name is None:
-            return 0.0
-        p = polygon(name)
-        return float(_distances(np.concatenate([p, 0.5 * (p[:-1] + p[1:])]), curve(name)).max())
-
     who = f"body {body.name!r}: at level {level} the polygon"
-    along = _along_strip_side(body, b if a is None else a, polygon, strip) if None in (a, b) and a != b else None
+    along = _along_strip_side(body, b if a is None else a, polygons, strip) if None in (a, b) and a != b else None
     if along:  # no level helps: the overlap is along a straight line, whatever the polygon's edges
         name, side, end, depth = along
         return (f"body {body.name!r}: outline part {name!r} leaves the face's {side} end ({end[0]:.6g}, {end[1]:.6g}) "
@@ -170,25 +157,49 @@ def clash_message(body, level: int, a, b, polygon, strip: np.ndarray) -> str:
                 f"every level; start it with a vertical line longer than the strip is deep ({depth:.3g} at level "
                 f"{level}), or let it leave the face at an angle")
     if a == b:
-        return f"{who} that stands for {what(a)} crosses itself; raise the level, or smooth the part"
-    ca, cb = curve(a), curve(b)
+        return f"{who} that stands for {_what(body, a)} crosses itself; raise the level, or smooth the part"
+    ca, cb = _dense(body, a, strip), _dense(body, b, strip)
     gap = min(float(_distances(ca, cb).min()), float(_distances(cb, ca).min()))
-    dev = stray(a) + stray(b)
+    dev = _stray(body, a, polygons, strip) + _stray(body, b, polygons, strip)
+    what = f"{_what(body, a)} and {_what(body, b)}"
     if not gap < dev:  # pragma: no cover - the polygons keep within their strays of the curves
-        return f"{who}s that stand for {what(a)} and {what(b)} cross; raise the level, or move them apart"
+        return f"{who}s that stand for {what} cross; raise the level, or move them apart"
     up = next((k for k in range(1, 5) if dev / 4**k < 0.5 * gap), None)
-    return (f"{who}s that stand for {what(a)} and {what(b)} cross: the polygons lie up to {dev:.3g} off the curves "
+    return (f"{who}s that stand for {what} cross: the polygons lie up to {dev:.3g} off the curves "
             f"in all, and the parts come within {gap:.3g} of each other; move them at least {1.2 * dev:.2g} apart"
             + (f", or raise the level to {level + up}" if up else ""))
 
 
-def _along_strip_side(body, name, polygon, strip: np.ndarray):
+def _dense(body, name, strip: np.ndarray) -> np.ndarray:
+    """The part itself (dense samples of its curves); the strip's chain for ``None``."""
+    if name is None:
+        return strip
+    return np.concatenate([s.sample(CLASH_SAMPLES) if s.is_arc else np.array([s.start, s.end]) if not s.is_spline
+                           else s.sample(max(4, CLASH_SAMPLES // (len(s.through) + 1)))
+                           for s in body.outline.part(name).segments])
+
+
+def _what(body, name) -> str:
+    if name is None:
+        return "the strip of columns along the face"
+    return f"{'hole' if name in {h.name for h in body.outline.holes} else 'outline part'} {name!r}"
+
+
+def _stray(body, name, polygons: dict, strip: np.ndarray) -> float:
+    """How far the polygon strays from the part: at its vertices and edge midpoints."""
+    if name is None:
+        return 0.0
+    p = polygons[name]
+    return float(_distances(np.concatenate([p, 0.5 * (p[:-1] + p[1:])]), _dense(body, name, strip)).max())
+
+
+def _along_strip_side(body, name, polygons: dict, strip: np.ndarray):
     """``(name, side, face end, strip depth)`` if the polygon of part ``name`` leaves a face end
     straight along the strip's vertical side, into the body (a free concave arc whose tangent is
     vertical there: its tangent polygon's first edge lies on the side), else ``None``."""
     if name is None or name in {h.name for h in body.outline.holes}:
         return None
-    p = polygon(name)
+    p = polygons[name]
     tol = 1e-12 * float(np.ptp(strip, axis=0).max())
     for side, k, inner, (e, nxt) in (("right", -1, strip[-1], (p[0], p[1])), ("left", 0, strip[0], (p[-1], p[-2]))):
         x = body.x_range[1 if k else 0]

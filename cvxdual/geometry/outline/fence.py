@@ -1,25 +1,20 @@
-"""gmsh behind a fence: every gmsh call runs in one child process, never in the caller's.
-
-gmsh is a large C++ library with one global model per process. It can crash (a segfault, an
-``abort``), ignore Ctrl-C inside a long call, run out of memory, and it holds state between
-calls; a caller may also run a gmsh session of its own. So the package never imports gmsh in the
-caller's process: :func:`in_gmsh` sends a request (a module-level function of the package and its
-arguments, pickled) to a child started with ``python -m cvxdual.geometry.gmsh_worker`` and waits
-for the answer, which is
-
-- bounded in time by the deadline being enforced (:func:`cvxdual.progress.time_left`): past it
-  the child is killed and :class:`~cvxdual.errors.TimeLimitError` raised;
-- bounded in memory: the child caps its own address space at what the machine has free when it
-  starts (:func:`cvxdual.memory.available_memory`), so a runaway mesh ends the child, not the caller;
-- interruptible: the parent waits in Python (Ctrl-C and the deadline's alarm reach it) and kills
-  the child on the way out; the child is in its own session, so a terminal's Ctrl-C goes to the
-  parent alone, and it ends itself when the parent dies;
-- one at a time: a lock serialises the callers' threads (the child holds one gmsh).
-
-The child is started on first use (about 0.7 s: the interpreter, NumPy and the package) and kept
-for the next requests; after a crash, a kill or a time-out the next request starts a new one.
-Its ``HOME`` is a temporary folder removed with it, so gmsh writes nothing under the user's.
-"""
+"""gmsh behind a fence: every gmsh call runs in one child process, never in the caller's. gmsh is
+a large C++ library with one global model per process. It can crash (a segfault, an ``abort``),
+ignore Ctrl-C inside a long call, run out of memory, and it holds state between calls; a caller
+may also run a gmsh session of its own. So the package never imports gmsh in the caller's
+process: :func:`in_gmsh` sends a request (a module-level function of the package and its
+arguments, pickled) to a child started with ``python -m cvxdual.geometry.outline.worker`` and
+waits for the answer, which is bounded in time by the deadline being enforced
+(:func:`cvxdual.progress.time_left`: past it the child is killed and
+:class:`~cvxdual.errors.TimeLimitError` raised); bounded in memory (the child caps its own address
+space at what the machine has free when it starts, :func:`cvxdual.memory.available_memory`, so a
+runaway mesh ends the child, not the caller); interruptible (the parent waits in Python, where
+Ctrl-C and the deadline's alarm reach it, and kills the child on the way out; the child is in its
+own session, so a terminal's Ctrl-C goes to the parent alone, and it ends itself when the parent
+dies); and one at a time (a lock serialises the callers' threads: the child holds one gmsh). The
+child is started on first use (about 0.7 s: the interpreter, NumPy and the package) and kept for
+the next requests; after a crash, a kill or a time-out the next request starts a new one. Its
+``HOME`` is a temporary folder removed with it, so gmsh writes nothing under the user's."""
 
 from __future__ import annotations
 
@@ -35,7 +30,7 @@ import sys
 import tempfile
 import threading
 
-from ..errors import CvxdualError, MeshError, TimeLimitError
+from ...errors import CvxdualError, MeshError, TimeLimitError
 
 HEADER = struct.Struct("<Q")  # each message: its length, then the pickle
 _LOCK = threading.Lock()  # one request at a time: the child holds one gmsh
@@ -46,7 +41,7 @@ def in_gmsh(function: str, *args, what: str = "gmsh"):
     """``function(*args)`` (``"module:name"`` inside the package) in the gmsh child; its result,
     or the :class:`~cvxdual.errors.CvxdualError` it raised, raised here. ``what`` names the work
     in messages ("meshing body 'bottom'")."""
-    from ..progress import time_left
+    from ...progress import time_left
 
     if not function.startswith("cvxdual."):
         raise ValueError(f"the gmsh child runs the package's own functions only, not {function!r}")
@@ -97,7 +92,7 @@ def _child() -> subprocess.Popen:
     home = tempfile.mkdtemp(prefix="cvxdual-gmsh-")
     env = {**os.environ, "HOME": home, "CVXDUAL_GMSH_HOME": home,
            "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}  # the caller's own cvxdual, wherever it is
-    proc = subprocess.Popen([sys.executable, "-m", "cvxdual.geometry.gmsh_worker", str(os.getpid())],
+    proc = subprocess.Popen([sys.executable, "-m", "cvxdual.geometry.outline.worker", str(os.getpid())],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
                             cwd=home, start_new_session=True, close_fds=True)
     _CHILD.append((proc, home))
@@ -114,7 +109,7 @@ def _send(proc: subprocess.Popen, data: bytes) -> None:
 
 def _receive(proc: subprocess.Popen, what: str) -> bytes:
     """The child's answer, waited for in Python (a signal interrupts the wait) up to the deadline."""
-    from ..progress import time_left
+    from ...progress import time_left
 
     fd = proc.stdout.fileno()
     buf = bytearray()

@@ -1,0 +1,15 @@
+"""The outline mesher: an outline body's mesh beyond the strip of columns along its face, made by
+gmsh in a process of its own. :func:`mesh_rest` is the entry (kept meshes, timed);
+:mod:`~cvxdual.geometry.outline.mesher` runs the steps on one
+:class:`~cvxdual.geometry.outline.build.OutlineBuild`: the loops (``loops``), the cuts into
+surfaces (``cuts``, ``regions``), the sizes (``sizes``), gmsh's mesh, and reading it back, refined
+and renumbered (``readback``); ``arcs`` holds the curved parts' polygons, ``fence`` and
+``worker`` the gmsh process."""
+
+from .build import SPLINE_SAMPLES, held_parts
+from .mesher import SMALL, forget_meshes, gmsh_mesh, gmsh_seconds, mesh_rest, mesh_threads
+from .readback import RestMesh
+from .sizes import strip_depth
+
+__all__ = ["SMALL", "SPLINE_SAMPLES", "RestMesh", "forget_meshes", "gmsh_mesh", "gmsh_seconds", "held_parts",
+           "mesh_rest", "mesh_threads", "strip_depth"]
