@@ -64,6 +64,17 @@ class Record(Mapping):
         return f"{type(self).__name__}({', '.join(shown)})"
 
 
+# -- sizes -------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class MeshSize(Record):
+    """A mesh's size counted before it is built (:func:`cvxdual.geometry.mesh.mesh_size`):
+    ``triangles`` and ``nodes`` (estimates: floats)."""
+
+    triangles: float
+    nodes: float
+
+
 # -- contact -------------------------------------------------------------------------------
 
 @dataclass(frozen=True, eq=False, kw_only=True, repr=False)
@@ -170,7 +181,7 @@ class CommonPart(Record):
 @dataclass(frozen=True, eq=False, kw_only=True, repr=False)
 class FieldDistance(Record):
     """``||a - b||`` of two stress fields of one scene on different meshes
-    (:func:`cvxdual.system.field.field_distance`, :func:`cvxdual.p0.norms.stress_distance`):
+    (:func:`cvxdual.system.field.field_distance`, :func:`cvxdual.system.field.piece_distance`):
     ``l2`` [S*L] and ``energy`` [sqrt(S)*L] with ``l2_rel``, ``energy_rel`` against ``a``;
     ``rule`` (points per direction, where one rule was used throughout) and the
     :class:`CommonPart` measures."""

@@ -17,6 +17,16 @@ __all__ = ["VOIGT_WEIGHT", "body_factors", "out_of_plane_factor", "shear_stress"
 VOIGT_WEIGHT = np.array([1.0, 1.0, 2.0])  # sigma:tau = sum(VOIGT_WEIGHT * sigma * tau) in Voigt form
 
 
+def compliances(scene) -> np.ndarray:
+    """The compliance matrix ``A`` (Voigt, engineering shear) of every body of ``scene``: ``(n_bodies, 3, 3)``."""
+    return np.stack([b.material.compliance for b in scene.bodies])
+
+
+def stiffnesses(scene) -> np.ndarray:
+    """The Hooke matrix ``C`` of every body of ``scene``: ``(n_bodies, 3, 3)``."""
+    return np.stack([b.material.stiffness for b in scene.bodies])
+
+
 def body_factors(scene) -> np.ndarray:
     """Factor ``c`` with ``s33 = c (s11 + s22)`` per body of ``scene``: ``nu`` in plane strain,
     0 in plane stress, NaN for a body given by its Hooke matrix alone in plane strain (no ``nu``)."""

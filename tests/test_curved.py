@@ -165,7 +165,7 @@ def test_too_coarse_for_curvature_is_a_clear_error():
 def test_both_types_converge_together(scene):
     """Both triangulations solve at 5 levels (status optimal, residuals checked by solve), and
     their stresses approach each other as h shrinks."""
-    from cvxdual.p0.norms import stress_distance
+    from cvxdual.system.field import piece_distance as stress_distance
     sc = cd.load_scene(scene)
     dist, hs = [], []
     for level in range(5):
@@ -265,7 +265,7 @@ def test_distance_between_non_nested_meshes_refines_straddling_pieces():
     rule misplaces the jumps of the studied field inside reference pieces. Re-integrating the
     pieces that straddle studied pieces with a finer rule must move the figure toward a much
     finer rule's value (measured: plain 2x2 is 1.9% off, 2x2 with 6x6 on straddlers 0.6%)."""
-    from cvxdual.p0.norms import stress_distance
+    from cvxdual.system.field import piece_distance as stress_distance
     sc = cd.load_scene("cylinder-in-groove")
     ref, sol = cd.solve(sc, "type2", 3, "fast"), cd.solve(sc, "type2", 1, "fast")
     truth = stress_distance(ref, sol, 6, 24)["l2_rel"]

@@ -13,8 +13,8 @@ import pytest
 
 from cvxdual import load_scene, solve
 from cvxdual.errors import CvxdualError
-from cvxdual.p0.norms import stress_distance
 from cvxdual.system.field import field_distance
+from cvxdual.system.field import piece_distance as stress_distance
 
 REF = 3  # the reference level of (a): 5103 pieces of rounded-punch, solved in about a second
 

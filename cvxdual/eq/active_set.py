@@ -35,6 +35,7 @@ from ..errors import MeshError, SolverError
 from ..kinds import Status
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
+from ..voigt import compliances
 from .balance import PROJECT_TOL, make_exact, rigid_motions
 from .element import (
     MASS0,
@@ -82,7 +83,7 @@ def local_blocks(space: EquilibriumSpace, tri: np.ndarray) -> tuple[np.ndarray, 
     n = len(tri)
     N = space.local_basis(tri)
     _, area = bary_gradients(sub_vertices(space.X[tri]))
-    A = np.stack([b.material.compliance for b in space.scene.bodies])[space.body[tri]]
+    A = compliances(space.scene)[space.body[tri]]
     K9 = (MASS0[None, :, None, :, None] * A[:, None, :, None, :]).reshape(n, 9, 9)
     H = np.zeros((n, 15, 15))
     for i in range(3):  # three sub-triangles; vectorised over the triangles
@@ -271,7 +272,7 @@ class HybridSolver:
         weighted by each triangle's compliance seen from the reference element) and its inverse."""
         sp_, sc, t = self.space, self.space.scales, self.plain
         _, area = bary_gradients(sp_.X[t])
-        A = np.stack([b.material.compliance for b in sp_.scene.bodies])[sp_.body[t]]
+        A = compliances(sp_.scene)[sp_.body[t]]
         self.ap = energy_coefficients(sp_.piola[t], A, np.abs(area)) * (sc.stress**2 / sc.energy)
         self.Hw_inv = np.empty((len(t), 9, 9))
         for lo in range(0, len(t), CHUNK):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshError
+from ..geometry.triangles import edge_lengths
 
 MASS0 = (np.ones((3, 3)) + np.eye(3)) / 12.0  # int phi_a phi_b / |T| for P1 on a triangle
 
@@ -82,7 +83,7 @@ def divergence_rows(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     sub-triangle areas ``(n_T, 3)`` and ``h_T`` (longest edge). Scaling by ``h_T`` makes the rows
     O(1) per unit stress."""
     g, area = bary_gradients(sub_vertices(X))  # (n_T, 3, 3, 2)
-    h = np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2).max(1)
+    h = edge_lengths(X).max(1)
     rows = np.zeros((len(X), 3, 2, 3, 3))  # sub i, component k, vertex a, Voigt
     rows[:, :, 0, :, 0] = g[..., 0]  # d s11/dx
     rows[:, :, 0, :, 2] = g[..., 1]  # d s12/dy
@@ -177,7 +178,7 @@ def divergence_to_reference(X: np.ndarray, g: np.ndarray) -> np.ndarray:
     on every sub-triangle (``h`` the longest edge, as in :func:`divergence_rows`)."""
     J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], -1)
     adj = np.stack([np.stack([J[:, 1, 1], -J[:, 0, 1]], -1), np.stack([-J[:, 1, 0], J[:, 0, 0]], -1)], -2)
-    h = np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2).max(1)
+    h = edge_lengths(X).max(1)
     gr = np.einsum("tab,tib->tia", adj, g.reshape(-1, 3, 2)) * (np.sqrt(2.0) / h)[:, None, None]
     return gr.reshape(-1, 6)
 

@@ -12,7 +12,9 @@ import numpy as np
 
 from ..geometry.quadrature import triangle_rule
 from ..kinds import Space
-from ..system.field import PieceField, StressField, cell_mask, slab_of
+from ..system.field import PieceField, StressField, cell_mask
+from ..voigt import stiffnesses
+from .columns import column_at
 from .element import bary_gradients
 
 
@@ -119,21 +121,9 @@ def kinematic_field(space, v: np.ndarray) -> PieceField:
     """``C e(v)`` of a displacement ``v (n_nodes, 2)`` of ``V_h``: constant on every straight
     triangle and on every slab of the curved pieces (its strain along the slab's face edge)."""
     from .bounds import slab_strains, strains
-    stiff = np.stack([b.material.stiffness for b in space.scene.bodies])
+    stiff = stiffnesses(space.scene)
     pieces = space.pieces
     per_piece = np.zeros((len(pieces), 3))
     per_piece[:space.n_tri] = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
     slab = np.einsum("sij,sj->si", stiff[pieces.slabs.body], slab_strains(space, v))
     return PieceField(space.scene, space.mesh, pieces, per_piece, slab=slab)
-
-
-def column_at(space, g: np.ndarray, piece: np.ndarray | None, pts: np.ndarray,
-              slab: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The column stress ``g(x)`` at points ``pts`` of the curved pieces ``piece`` (or of the slabs
-    ``slab``, when known), and the slab of each point."""
-    if slab is None:
-        slab = slab_of(space.pieces, piece, pts)
-    col = space.slab_column[slab]
-    x0, x1 = space.faces.x[space.columns[col], 0], space.faces.x[space.columns[col], 1]
-    t = (pts[:, 0] - x0) / (x1 - x0)
-    return g[col, 0] * (1 - t) + g[col, 1] * t, slab

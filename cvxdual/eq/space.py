@@ -49,6 +49,7 @@ from ..linalg.sparse import assemble_blocks
 from ..scene.scene import Scene
 from ..system.assembly import Scales
 from ..system.boundary import sliding_normal
+from ..voigt import compliances
 from .balance import balance_loads, make_scales
 from .columns import FaceIntervals, check_column_data, column_energy, face_intervals, slab_interval
 from .edges import MeshEdges, edge_ids, mesh_edges, outward_normals
@@ -228,7 +229,7 @@ class EquilibriumSpace:
     def energy_matrix(self) -> sp.csr_matrix:
         """``Q`` with ``1/2 sigma.Q sigma = 1/2 int sigma:A sigma`` on vertex values (exact P1 mass)."""
         _, area = self.sub_geometry
-        A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]  # (n_T, 3, 3)
+        A = compliances(self.scene)[self.body]  # (n_T, 3, 3)
         blk = area[:, :, None, None, None, None] * MASS0[None, None, :, None, :, None] * A[:, None, None, :, None, :]
         idx = 9 * np.arange(3 * self.n_tri)[:, None] + np.arange(9)[None, :]
         n = 27 * self.n_tri
@@ -249,7 +250,7 @@ class EquilibriumSpace:
         (:meth:`energy_matrix` and :meth:`column_energy_matrix`, without forming them)."""
         _, area = self.sub_geometry
         s = np.asarray(sigma, float).reshape(self.n_tri, 3, 3, 3)  # triangle, sub, vertex, Voigt
-        A = np.stack([b.material.compliance for b in self.scene.bodies])[self.body]
+        A = compliances(self.scene)[self.body]
         MsA = (MASS0 @ s) @ A[:, None]  # (sum_b M_ab sigma_b) A at every vertex (A symmetric)
         e = float(area.ravel() @ (s * MsA).sum((2, 3)).ravel())
         if g is not None and len(self.columns):
@@ -486,7 +487,7 @@ def build_space(mesh: Mesh, pieces: Pieces, triangulation: str) -> EquilibriumSp
     slab_iv = slab_interval(mesh, pieces, faces)
     where = np.full(len(faces), -1)
     where[columns] = np.arange(len(columns))
-    compliance = np.stack([b.material.compliance for b in scene.bodies])
+    compliance = compliances(scene)
     space = EquilibriumSpace(mesh=mesh, pieces=pieces, triangulation=triangulation, tri=tri, X=X, body=body,
                              piola=Q, coef=coef, dofs=local_dofs(edges, len(X)), edges=edges, Tm=Tm, z_fix=z_fix,
                              kind=kind, div_rhs=div_rhs, contact_y=contact_y, contact_x=cl["contact_x"],

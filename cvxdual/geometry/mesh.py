@@ -24,10 +24,12 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import MeshError
+from ..records import MeshSize
 from ..scene.scene import Body, Scene
 from ..validate import short
 from .mesh_check import check_body_mesh
 from .outline import RestMesh, held_parts, mesh_rest, strip_depth
+from .triangles import edge_lengths
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
 PROBE_COLUMNS = 32  # outline bodies are counted on a mesh of at most this many columns, scaled up (0.01-0.06 s)
@@ -103,7 +105,7 @@ def _required(scene: Scene, extra) -> list:
     return [v for v, _ in named]
 
 
-def mesh_size(scene: Scene, level: int, extra=()) -> dict:
+def mesh_size(scene: Scene, level: int, extra=()) -> MeshSize:
     """Triangles and nodes of the mesh of ``scene`` at ``level`` with the break points ``extra``
     (as :func:`column_abscissae`), counted without building it (floats: a hostile level must
     give a huge count, not an allocation or an overflow)."""
@@ -125,7 +127,7 @@ def mesh_size(scene: Scene, level: int, extra=()) -> dict:
         rest = _probe_rest(scene, body, level, cols, extra)
         n_tri += 2.0 * cols + rest
         n_nodes += 2.0 * (cols + 1.0) + 0.5 * rest  # a triangle mesh has about half as many nodes as triangles
-    return {"triangles": n_tri, "nodes": n_nodes}
+    return MeshSize(triangles=n_tri, nodes=n_nodes)
 
 
 def _probe_rest(scene: Scene, body: Body, level: int, cols: float, extra) -> float:
@@ -258,8 +260,7 @@ class Mesh:
 
     def _edges(self) -> np.ndarray:
         """Edge lengths of every triangle ``(n_tri, 3)``."""
-        p = self.points[self.triangles()]
-        return np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)
+        return edge_lengths(self.points[self.triangles()])
 
     @property
     def h(self) -> float:

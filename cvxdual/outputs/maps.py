@@ -18,6 +18,7 @@ from functools import singledispatch
 import numpy as np
 from matplotlib.colors import CenteredNorm, Normalize
 
+from ..eq.columns import column_at
 from ..eq.space import EquilibriumSpace
 from ..geometry.pieces import Pieces, piece_outlines, slab_outlines
 from ..voigt import body_factors, shear_stress
@@ -153,10 +154,7 @@ def column_strips(sol) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     tris = cut.reshape(-1, 3, 2)
     if sol.column_stress is None:  # a P0 solution's bounds: the geometry only
         return tris, slab, None
-    col = space.slab_column[slab]
-    x0, x1 = (space.faces.x[space.columns[col], e][:, None] for e in (0, 1))
-    t = (tris[..., 0] - x0) / (x1 - x0)
-    g = sol.column_stress[col, 0][:, None] * (1 - t) + sol.column_stress[col, 1][:, None] * t
+    g = column_at(space, sol.column_stress, None, tris.reshape(-1, 2), np.repeat(slab, 3))[0].reshape(-1, 3)
     return tris, slab, np.stack([np.zeros_like(g), g, np.zeros_like(g)], -1)
 
 

@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..eq.columns import column_at
 from ..eq.fields import EquilibriumField
 from ..geometry.locate import nearest_node_values
 from ..geometry.pieces import piece_outlines, slab_outlines
@@ -188,11 +189,7 @@ def _column_cells(sol) -> dict:
     s = pieces.slabs
     poly = slab_outlines(pieces)
     m, k = poly.shape[:2]
-    g = sol.column_stress
-    col = space.slab_column
-    x0, x1 = (space.faces.x[space.columns[col], e][:, None] for e in (0, 1))
-    t = (poly[..., 0] - x0) / (x1 - x0)
-    gx = g[col, 0][:, None] * (1 - t) + g[col, 1][:, None] * t
+    gx = column_at(space, sol.column_stress, None, poly.reshape(-1, 2), np.repeat(np.arange(m), k))[0].reshape(m, k)
     stress = np.stack([np.zeros_like(gx), gx, np.zeros_like(gx)], -1)
     a, b = s.edge_nodes.T
     xa, xb = sol.mesh.points[a, 0][:, None], sol.mesh.points[b, 0][:, None]

@@ -10,11 +10,13 @@ another.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import attrgetter
+from typing import ClassVar
 
 import numpy as np
 
 from ..errors import SceneError
-from ..scene.scene import Scene
+from ..scene.scene import ExactKind, Scene
 from .hertz import HertzData, body_stress, contact_modulus, hertz_line_contact, hertz_pressure
 from .punch import PunchData, punch_body_stress, punch_contact, punch_pressure
 
@@ -34,52 +36,65 @@ class UniformField:
 
 
 @dataclass(frozen=True)
-class HertzField:
-    """The McEwen field of linearised Hertz line contact, on faces ``y = y_face``."""
+class ContactField:
+    """A closed-form field of a contact centred at ``xc``, on faces ``y = y_face``: ``contact``
+    holds its numbers (the half-width ``a`` among them). A kind names in its class statement its
+    ``kind``, the ``label`` of messages and the ``keys`` of ``contact`` that :meth:`data` reports
+    (in that order), and defines its stress and its pressure in ``u = x - xc``."""
 
-    hertz: HertzData
+    contact: HertzData | PunchData
     xc: float
     y_face: float
-    label = "Hertz"
+    kind: ClassVar[ExactKind]
+    label: ClassVar[str]
+    keys: ClassVar[tuple[str, ...]]
+
+    def __init_subclass__(cls, kind: ExactKind, label: str, keys: tuple[str, ...], **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.kind, cls.label, cls.keys = kind, label, keys
 
     @property
     def half_width(self) -> float:
-        return self.hertz.a
+        return self.contact.a
+
+    def stress(self, body: int, pts: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def pressure(self, x: np.ndarray) -> np.ndarray:
+        return self._pressure(np.asarray(x, float) - self.xc)
+
+    def _pressure(self, u: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def data(self) -> dict:
+        return {"kind": self.kind, **{k: getattr(self.contact, k) for k in self.keys}}
+
+
+@dataclass(frozen=True)
+class HertzField(ContactField, kind="hertz", label="Hertz", keys=("a", "p0", "E_star", "R", "load")):
+    """The McEwen field of linearised Hertz line contact."""
+
+    hertz = property(attrgetter("contact"), doc="The contact's numbers (:class:`HertzData`), by the kind's name.")
 
     def stress(self, body: int, pts: np.ndarray) -> np.ndarray:
         return body_stress(pts[:, 0], pts[:, 1], self.hertz.a, self.hertz.p0,
                            x_c=self.xc, y_face=self.y_face, upper=(body == 0))
 
-    def pressure(self, x: np.ndarray) -> np.ndarray:
-        return hertz_pressure(np.asarray(x, float) - self.xc, self.hertz.a, self.hertz.p0)
-
-    def data(self) -> dict:
-        h = self.hertz
-        return {"kind": "hertz", "a": h.a, "p0": h.p0, "E_star": h.E_star, "R": h.R, "load": h.load}
+    def _pressure(self, u: np.ndarray) -> np.ndarray:
+        return hertz_pressure(u, self.hertz.a, self.hertz.p0)
 
 
 @dataclass(frozen=True)
-class PunchField:
-    """Flamant superposition of the rounded flat punch's pressure, on faces ``y = y_face``."""
+class PunchField(ContactField, kind="punch", label="punch", keys=("a", "b", "E_star", "R", "load")):
+    """Flamant superposition of the rounded flat punch's pressure."""
 
-    punch: PunchData
-    xc: float
-    y_face: float
-    label = "punch"
-
-    @property
-    def half_width(self) -> float:
-        return self.punch.a
+    punch = property(attrgetter("contact"), doc="The contact's numbers (:class:`PunchData`), by the kind's name.")
 
     def stress(self, body: int, pts: np.ndarray) -> np.ndarray:
         return punch_body_stress(pts[:, 0], pts[:, 1], self.punch, self.xc, self.y_face, upper=(body == 0))
 
-    def pressure(self, x: np.ndarray) -> np.ndarray:
-        return punch_pressure(np.asarray(x, float) - self.xc, self.punch)
-
-    def data(self) -> dict:
-        d = self.punch
-        return {"kind": "punch", "a": d.a, "b": d.b, "E_star": d.E_star, "R": d.R, "load": d.load}
+    def _pressure(self, u: np.ndarray) -> np.ndarray:
+        return punch_pressure(u, self.punch)
 
 
 def exact_field(scene: Scene):
@@ -115,7 +130,7 @@ def exact_reference(scene: Scene):
     if scene.exact is None or why is not None:
         return None, why
     field = exact_field(scene)
-    if isinstance(field, HertzField | PunchField):
+    if isinstance(field, ContactField):
         # the closed form presses the faces together on [xc - a, xc + a]; where that lies on both
         # bodies, it must be free to touch (a is computed from the loads, which may have changed)
         lo, hi = max(b.x_range[0] for b in scene.bodies), min(b.x_range[1] for b in scene.bodies)

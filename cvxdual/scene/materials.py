@@ -8,13 +8,15 @@ Convention (used everywhere in cvxdual): stress ``s = (s11, s22, s12)``, enginee
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 
 from ..errors import SceneError
 from ..validate import number, short
 
-PLANES = ("strain", "stress")
+Plane = Literal["strain", "stress"]
+PLANES: tuple[Plane, ...] = get_args(Plane)
 
 
 @dataclass(frozen=True)
@@ -27,11 +29,11 @@ class Material:
     C: tuple[tuple[float, float, float], ...]
     E: float | None = None
     nu: float | None = None
-    plane: str = "strain"
+    plane: Plane = "strain"
     description: str = field(default="", compare=False)
 
     @classmethod
-    def isotropic(cls, E: float, nu: float, plane: str = "strain") -> "Material":
+    def isotropic(cls, E: float, nu: float, plane: Plane = "strain") -> "Material":
         E = number(E, "material E", "positive")
         nu = number(nu, "material nu")
         if plane not in PLANES:
@@ -56,7 +58,7 @@ class Material:
                    description=f"isotropic E={E:g}, nu={nu:g}, plane {plane}")
 
     @classmethod
-    def hooke(cls, C, plane: str = "strain") -> "Material":
+    def hooke(cls, C, plane: Plane = "strain") -> "Material":
         if isinstance(C, np.ndarray):
             C = C.tolist()
         rows = C if isinstance(C, (list, tuple)) and len(C) == 3 else None

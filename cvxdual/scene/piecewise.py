@@ -13,21 +13,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import ClassVar
+from typing import get_args
 
 import numpy as np
 
 from ..errors import SceneError
 from ..validate import pair, short, table
-from .profiles import Circle, Cosine, Flat, LowerCircle, Parabola, Profile, UpperCircle
+from .profiles import Branch, Circle, Cosine, Flat, LowerCircle, Parabola, Profile, ProfileKind, UpperCircle, parameter
 
 
 @dataclass(frozen=True)
-class Punch(Profile):
-    kind: ClassVar[str] = "punch"
-    accepts: ClassVar[dict] = {"b": "nonnegative", "R": "positive"}
-    b: float = 0.0
-    R: float = 1.0
+class Punch(Profile, kind="punch"):
+    b: float = parameter(0.0, "nonnegative")
+    R: float = parameter(1.0, "positive")
     xc: float = 0.0
 
     def _u(self, x):
@@ -63,12 +61,11 @@ class Punch(Profile):
 
 
 @dataclass(frozen=True)
-class Composite(Profile):
+class Composite(Profile, kind="composite"):
     """Lines and arcs joined end to end, left to right: ``nodes`` ``((x, y), ...)`` the ends of
     the pieces, ``centers`` one per piece (``None`` for a line). Each arc is a graph: its ``x``
     interval lies within its circle's and it stays on one side of the centre's height."""
 
-    kind: ClassVar[str] = "composite"
     nodes: tuple = ()
     centers: tuple = ()
 
@@ -210,14 +207,9 @@ def composite_from_dict(d: dict, where: str) -> Composite:
     return Composite(tuple(nodes), tuple(centers))
 
 
-PROFILE_KINDS: dict[str, type[Profile]] = {
-    "flat": Flat,
-    "parabola": Parabola,
-    "circle": Circle,
-    "cosine": Cosine,
-    "punch": Punch,
-    "composite": Composite,
-}
+# by the names of their class statements (ProfileKind)
+PROFILE_KINDS: dict[ProfileKind, type[Profile]] = {
+    cls.kind: cls for cls in (Flat, Parabola, Circle, Cosine, Punch, Composite)}
 
 
 def profile_from_dict(d: dict, where: str) -> Profile:
@@ -231,7 +223,7 @@ def profile_from_dict(d: dict, where: str) -> Profile:
     cls: type[Profile] = PROFILE_KINDS[kind]
     if kind == "circle":
         branch = d.pop("branch", "lower")
-        if branch not in ("lower", "upper"):
+        if branch not in get_args(Branch):
             raise SceneError(f"{where}: circle branch must be 'lower' or 'upper', got {branch!r}")
         cls = LowerCircle if branch == "lower" else UpperCircle
     names = {f.name for f in fields(cls)}

@@ -18,26 +18,51 @@ kind           curve
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, ClassVar, Literal, get_args
 
 import numpy as np
 
 from ..errors import SceneError
 from ..validate import number
 
+ProfileKind = Literal["flat", "parabola", "circle", "cosine", "punch", "composite"]
+Branch = Literal["lower", "upper"]  # of a circle: the convex lower half or the concave upper one
+
+# the values a parameter takes (validate.number's names) and the test of a value
+TAKES = {"any": lambda v: True, "nonzero": lambda v: v != 0, "nonnegative": lambda v: v >= 0,
+         "positive": lambda v: v > 0}
+
+
+def parameter(default: float, accepts: str = "any", refusal: str = "") -> Any:
+    """A profile's number of the values ``accepts`` names (a key of :data:`TAKES`; it shapes the
+    advice of :func:`~cvxdual.validate.number`). With a ``refusal``, a number outside them is
+    refused as ``"<kind> profile: <refusal>"``; without one the kind takes any number."""
+    return field(default=default, metadata={"accepts": accepts, "refusal": refusal})
+
 
 @dataclass(frozen=True)
 class Profile:
-    """Base class; subclasses define ``kind`` and the evaluation methods."""
+    """Base class; a subclass names its kind in its class statement (``class Flat(Profile,
+    kind="flat")``) and defines its parameters (plain ``float`` fields, or :func:`parameter`
+    where they take fewer values) and the evaluation methods."""
 
-    kind: ClassVar[str] = ""
-    accepts: ClassVar[dict] = {}  # parameter -> the values it takes (validate.number), where not any
+    kind: ClassVar[ProfileKind]
+
+    def __init_subclass__(cls, kind: ProfileKind | None = None, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if kind is not None:
+            if kind not in get_args(ProfileKind):
+                raise TypeError(f"profile kind {kind!r} is not one of {get_args(ProfileKind)}")
+            cls.kind = kind
 
     def __post_init__(self):
         for f in fields(self):
             object.__setattr__(self, f.name, number(getattr(self, f.name), f"{self.kind} profile: '{f.name}'",
-                                                    self.accepts.get(f.name, "any")))
+                                                    f.metadata.get("accepts", "any")))
+        for f in fields(self):  # each refused after every number is checked
+            if f.metadata.get("refusal") and not TAKES[f.metadata["accepts"]](getattr(self, f.name)):
+                raise SceneError(f"{self.kind} profile: {f.metadata['refusal']}")
 
     def value(self, x):
         raise NotImplementedError
@@ -87,8 +112,7 @@ class Profile:
 
 
 @dataclass(frozen=True)
-class Flat(Profile):
-    kind: ClassVar[str] = "flat"
+class Flat(Profile, kind="flat"):
     y0: float = 0.0
 
     def value(self, x):
@@ -112,17 +136,10 @@ class Flat(Profile):
 
 
 @dataclass(frozen=True)
-class Parabola(Profile):
-    kind: ClassVar[str] = "parabola"
-    accepts: ClassVar[dict] = {"R": "nonzero"}
-    R: float = 1.0
+class Parabola(Profile, kind="parabola"):
+    R: float = parameter(1.0, "nonzero", "R must be non-zero (negative R opens downward)")
     xc: float = 0.0
     y0: float = 0.0
-
-    def __post_init__(self):
-        super().__post_init__()
-        if self.R == 0:
-            raise SceneError("parabola profile: R must be non-zero (negative R opens downward)")
 
     def value(self, x):
         u = np.asarray(x, float) - self.xc
@@ -144,18 +161,11 @@ class Parabola(Profile):
 
 
 @dataclass(frozen=True)
-class Circle(Profile):
-    kind: ClassVar[str] = "circle"
-    accepts: ClassVar[dict] = {"R": "positive"}
-    R: float = 1.0
+class Circle(Profile, kind="circle"):
+    R: float = parameter(1.0, "positive", "radius R must be positive")
     xc: float = 0.0
     yc: float = 1.0
-    branch: ClassVar[str] = "lower"
-
-    def __post_init__(self):
-        super().__post_init__()
-        if self.R <= 0:
-            raise SceneError("circle profile: radius R must be positive")
+    branch: ClassVar[Branch] = "lower"
 
     @property
     def _s(self) -> float:
@@ -198,29 +208,22 @@ class Circle(Profile):
 class LowerCircle(Circle):
     """Lower half of a circle: convex (e.g. the bottom of a cylinder)."""
 
-    branch: ClassVar[str] = "lower"
+    branch = "lower"
 
 
 @dataclass(frozen=True)
 class UpperCircle(Circle):
     """Upper half of a circle: concave (e.g. the top of a cylinder, or a groove seen from above)."""
 
-    branch: ClassVar[str] = "upper"
+    branch = "upper"
 
 
 @dataclass(frozen=True)
-class Cosine(Profile):
-    kind: ClassVar[str] = "cosine"
-    accepts: ClassVar[dict] = {"wavelength": "positive"}
+class Cosine(Profile, kind="cosine"):
     amplitude: float = 0.0
-    wavelength: float = 1.0
+    wavelength: float = parameter(1.0, "positive", "wavelength must be positive")
     x0: float = 0.0
     y0: float = 0.0
-
-    def __post_init__(self):
-        super().__post_init__()
-        if self.wavelength <= 0:
-            raise SceneError("cosine profile: wavelength must be positive")
 
     @property
     def _k(self) -> float:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field, replace
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -39,21 +40,28 @@ from .materials import Material
 from .outline import Outline, check_outline
 from .profiles import Flat, Profile
 
-SIDES = ("face", "far", "left", "right")
+Side = Literal["face", "far", "left", "right"]  # of a column body
+PartKind = Literal["clamped", "sliding", "traction"]
+Position = Literal["upper", "lower"]
+TractionKind = Literal["uniform", "exact"]
+ExactKind = Literal["uniform", "hertz", "punch"]
+FrictionKind = Literal["tresca"]
+
+SIDES: tuple[Side, ...] = get_args(Side)
 MAX_INFLEXIONS = 1000  # of a face over its body
-PART_KINDS = ("clamped", "sliding", "traction")
-POSITIONS = ("upper", "lower")
+PART_KINDS: tuple[PartKind, ...] = get_args(PartKind)
+POSITIONS: tuple[Position, ...] = get_args(Position)
 
 
 @dataclass(frozen=True)
 class Traction:
     """A prescribed surface traction: ``uniform`` with ``value = (Px, Py)``, or ``exact``."""
 
-    kind: str = "uniform"
+    kind: TractionKind = "uniform"
     value: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
-        if self.kind not in ("uniform", "exact"):
+        if self.kind not in get_args(TractionKind):
             raise SceneError(f"traction kind must be 'uniform' or 'exact', got {short(self.kind)}")
         object.__setattr__(self, "value", pair(self.value, "traction value"))
 
@@ -63,8 +71,8 @@ class BoundaryPart:
     """A support or load on one side of a body, optionally on a sub-interval of that side
     (an ``x`` interval on ``face``/``far``, a ``y`` interval on ``left``/``right``)."""
 
-    on: str
-    kind: str
+    on: Side | str  # a side, or a part of the body's outline
+    kind: PartKind
     traction: Traction | None = None
     interval: tuple[float, float] | None = None
     name: str = ""
@@ -103,7 +111,7 @@ class Body:
     ``focus_depth`` the depth below the face over which the layers are graded finest."""
 
     name: str
-    position: str
+    position: Position
     x_range: tuple[float, float]
     far: float | None  # None only for an outline body: then the outline's extreme height
     face: Profile
@@ -239,7 +247,7 @@ class ExactSpec:
     can tell when the scene has changed under it. ``any_material`` (``uniform`` only) is the
     declarer's claim that the field solves the scene for any isotropic materials (a patch test)."""
 
-    kind: str
+    kind: ExactKind
     stress: tuple[float, float, float] | None = None
     R: float | None = None
     load: float | None = None
@@ -310,11 +318,11 @@ class Friction:
     threshold does not depend on the pressure. Coulomb friction (``|t| <= mu p``) makes the
     problem non-convex and is not offered."""
 
-    kind: str = "tresca"
+    kind: FrictionKind = "tresca"
     g: float = field(kw_only=True)  # no sensible default: a threshold must be given
 
     def __post_init__(self):
-        if self.kind != "tresca":
+        if self.kind not in get_args(FrictionKind):
             raise SceneError(f"friction kind must be 'tresca', got {short(self.kind)}; Coulomb friction is not "
                              "convex and is not offered: give kind = \"tresca\" with a slip threshold g")
         g = self.g

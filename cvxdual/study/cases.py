@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import CvxdualError
 from ..kinds import Space, Status
+from ..records import FieldDistance
 from ..sizing import peak_mb
 from ..system.field import PieceField, StressField, field_distance
 from ..validate import one_line
@@ -231,13 +232,10 @@ def _recache(cache: Cache, key: str, f) -> None:
         cache.put_arrays(key, stress=f.stress, column=f.column, bound=np.array([f.bound]))
 
 
-def distance(a, b, n: int, n_fine: int) -> dict:
-    """``||a - b||`` over ``a``'s cells: :func:`cvxdual.p0.norms.stress_distance` between P0 fields
-    (as it always was), :func:`cvxdual.eq.fields.field_distance` where either is an equilibrium field."""
-    from ..p0.norms import stress_distance
+def distance(a, b, n: int, n_fine: int) -> FieldDistance:
+    """``||a - b||`` over ``a``'s cells (:func:`cvxdual.system.field.field_distance`) of two stress
+    fields or solutions."""
     fa, fb = (x if isinstance(x, StressField) else x.field for x in (a, b))
-    if all(type(f) is PieceField and f.slab is None for f in (fa, fb)):
-        return stress_distance(fa, fb, n, n_fine)
     return field_distance(fa, fb, n, n_fine)
 
 

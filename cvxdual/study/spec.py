@@ -41,6 +41,7 @@ import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal, get_args
 
 from ..errors import CvxdualError
 from ..geometry.triangulation import TRIANGULATIONS
@@ -48,6 +49,9 @@ from ..kinds import SPACE_NAMES, Space
 from ..validate import file_stem
 
 PSEUDO_SOLVERS = ("fast", "limit")
+ReferenceKind = Literal["exact", "none", "finer"]
+Isolate = Literal["none", "process"]  # how a case runs: in the worker, or in a fresh process
+CheckAt = Literal["finest", "all", "none"]  # metrics.check: the levels the finer rules also integrate
 METRIC_DEFAULTS = {"rule": 6, "check_rule": 10, "ref_rule": 2, "ref_fine": 6, "ref_check_rule": 3,
                    "ref_check_fine": 8, "check": "finest", "edge_share": False}
 KEYS = {"name", "title", "description", "scenes", "triangulations", "stress_spaces", "levels", "solvers", "set",
@@ -66,7 +70,7 @@ class StudyError(CvxdualError, ValueError):
 class Reference:
     """What a case's error is measured against: ``exact``, ``none``, or a finer ``level``."""
 
-    kind: str  # "exact" | "none" | "finer"
+    kind: ReferenceKind
     level: int | None = None
     triangulation: str = "type2"
     solver: str = "fast"
@@ -100,7 +104,7 @@ class Case:
     metrics: tuple  # ((name, value), ...)
     check_rule: bool  # also integrate with the finer rules (the finest level of a series)
     save_stress: bool
-    isolate: str
+    isolate: Isolate
     timeout: float | None
     profile: bool
     tags: tuple  # ((column, value), ...)
@@ -386,7 +390,7 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
     bad = set(metrics) - set(METRIC_DEFAULTS)
     if bad:
         raise StudyError(f"study spec {w}: unknown metric {sorted(bad)[0]!r}; allowed: {', '.join(METRIC_DEFAULTS)}")
-    if metrics["check"] not in ("finest", "all", "none"):
+    if metrics["check"] not in get_args(CheckAt):
         raise StudyError(f"study spec {w}: metrics.check must be finest, all or none")
     grid = d.get("set") or {}
     if not isinstance(grid, dict):
@@ -398,7 +402,7 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
             raise StudyError(f"study spec {w}: units = [length factor, stress factor, \"m\", \"Pa\"]")
         units = tuple(units)
     isolate = d.get("isolate", "none")
-    if isolate not in ("none", "process"):
+    if isolate not in get_args(Isolate):
         raise StudyError(f"study spec {w}: isolate must be \"none\" or \"process\"")
     tags = d.get("tags") or {}
     out = []

@@ -22,6 +22,7 @@ from ..errors import SceneError
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..linalg.sparse import assemble_blocks
+from ..voigt import compliances, stiffnesses
 from .boundary import Supports, free_dofs, load_vector, prolongation, supports, to_frames
 from .rigid import rigid_modes
 
@@ -150,7 +151,6 @@ class System:
 
 def stress_operators(mesh: Mesh, pieces: Pieces) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray]:
     """``E`` (column block ``P`` is ``|P| B_P^T``), ``A_h`` and the Hooke matrix ``C_P`` of every piece."""
-    bodies = mesh.scene.bodies
     n_p = len(pieces)
     # built directly in compressed form (no COO sort and sum: no two pieces share a column):
     # column 3P + c of E holds |P| B_P[c, :] at the piece's six (distinct) dofs; A_h is block diagonal
@@ -159,11 +159,11 @@ def stress_operators(mesh: Mesh, pieces: Pieces) -> tuple[sp.csr_matrix, sp.csr_
     E = sp.csc_matrix(((pieces.area[:, None, None] * pieces.B).reshape(-1),
                        np.repeat(pieces.dofs, 3, axis=0).astype(idx).reshape(-1), cols(6)),
                       shape=(2 * mesh.n_nodes, 3 * n_p)).tocsr()
-    compliance = np.stack([b.material.compliance for b in bodies])[pieces.body]
+    compliance = compliances(mesh.scene)[pieces.body]
     r3 = np.arange(3 * n_p, dtype=idx).reshape(n_p, 3)
     Ah = sp.csr_matrix(((pieces.area[:, None, None] * compliance).reshape(-1),  # row-major blocks: CSR as is
                         np.repeat(r3, 3, axis=0).reshape(-1), cols(3)), shape=(3 * n_p, 3 * n_p))
-    C = np.stack([b.material.stiffness for b in bodies])[pieces.body]
+    C = stiffnesses(mesh.scene)[pieces.body]
     return E, Ah, C
 
 
