@@ -24,7 +24,6 @@ from cvxdual.eq.element import (
     REF_DIV,
     REF_DIVFREE,
     REF_ENERGY,
-    bary_gradients,
     divergence_rows,
     divergence_to_reference,
     edge_blocks,
@@ -36,10 +35,10 @@ from cvxdual.eq.element import (
     local_basis,
     piola,
     reference_energy,
-    sub_vertices,
 )
 from cvxdual.eq.model import EquilibriumModel
 from cvxdual.eq.space import EquilibriumSpace
+from cvxdual.geometry.triangles import bary_gradients, sub_vertices
 from cvxdual.system.boundary import supports
 
 # Every constraint is exact to rounding: values ~1e-14 relative are measured (double precision

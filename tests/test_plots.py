@@ -108,6 +108,7 @@ def test_every_axis_labelled_with_its_unit(case):
                 assert UNIT.search(label), f"{name}, axes {ax.get_title()!r}: label {label!r} has no [unit]"
 
 
+@pytest.mark.slow  # 25 s over its 17 scenes: the quick tier draws every figure kind elsewhere
 @pytest.mark.parametrize("case", CASES)
 def test_no_text_leaves_the_figure(case):
     _, figs = solved(case)

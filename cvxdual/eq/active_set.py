@@ -32,6 +32,7 @@ import scipy.sparse as sp
 
 from ..activeset.core import ActiveSetStats, coarse_start, cover, iterate, transfer_active, worst_flipped
 from ..errors import MeshError, SolverError
+from ..geometry.triangles import bary_gradients, sub_vertices
 from ..kinds import Status
 from ..linalg.factor import SPDFactor
 from ..solution import SolverStats
@@ -43,13 +44,11 @@ from .element import (
     REF_DIVFREE,
     REF_ENERGY_DIVFREE,
     REF_ENERGY_MIXED,
-    bary_gradients,
     divergence_rows,
     divergence_to_reference,
     energy_coefficients,
     inverse2,
     reference_energy,
-    sub_vertices,
 )
 from .space import EquilibriumSpace
 

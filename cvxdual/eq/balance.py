@@ -11,11 +11,12 @@ import scipy.sparse as sp
 
 from ..errors import SolverError
 from ..geometry.mesh import Mesh
+from ..geometry.triangles import bary_gradients
 from ..system.assembly import Scales
 from ..system.boundary import supports
 from ..system.rigid import balance_correction, candidates, carried_solve, check_balance
 from .edges import outward_normals
-from .element import bary_gradients, traction_rows
+from .element import traction_rows
 
 # equilibrium residual (relative to the stress scale) below which the field is left as solved: an
 # order under the certificate's "exact to rounding" (eq.bounds.ADMISSIBLE_TOL) and above the

@@ -21,13 +21,14 @@ import scipy.sparse as sp
 
 from ..errors import SceneError
 from ..geometry.quadrature import gauss01, triangle_rule
+from ..geometry.triangles import bary_gradients
 from ..linalg.sparse import assemble_blocks
 from ..records import BoundContributions, Bounds, DisplacementFix, ExactErrors
 from ..system.boundary import supports
 from ..voigt import VOIGT_WEIGHT, compliances, stiffnesses
 from .columns import CONCAVE1, column_at, column_gap
 from .edges import outward_normals
-from .element import MASS0, bary_gradients, frame_rows, internal_rows
+from .element import MASS0, frame_rows, internal_rows
 from .space import FIXED, N_GAUSS, EquilibriumSpace
 
 ADMISSIBLE_TOL = 1e-12  # relative violation of any constraint still "exact to rounding"

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshError
-from ..geometry.triangles import edge_lengths
+from ..geometry.triangles import bary_gradients, edge_lengths, sub_vertices
 
 MASS0 = (np.ones((3, 3)) + np.eye(3)) / 12.0  # int phi_a phi_b / |T| for P1 on a triangle
 
@@ -27,21 +27,6 @@ def frame_rows(n: np.ndarray, a: np.ndarray | None = None) -> np.ndarray:
     t = np.stack([-a[..., 1], a[..., 0]], -1)
     T = traction_rows(n)
     return np.stack([np.einsum("...i,...ij->...j", a, T), np.einsum("...i,...ij->...j", t, T)], -2)
-
-
-def sub_vertices(X: np.ndarray) -> np.ndarray:
-    """``(n_T, 3, 3, 2)``: vertices ``(X_i, X_{i+1}, c)`` of the sub-triangles of macro triangles ``X``."""
-    c = np.broadcast_to(X.mean(1, keepdims=True), X.shape)
-    return np.stack([X, np.roll(X, -1, axis=1), c], axis=2)
-
-
-def bary_gradients(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients ``(..., 3, 2)`` of the barycentric functions and areas of triangles ``p (..., 3, 2)``."""
-    d1, d2 = p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]
-    a2 = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
-    g1 = np.stack([d2[..., 1], -d2[..., 0]], -1) / a2[..., None]
-    g2 = np.stack([-d1[..., 1], d1[..., 0]], -1) / a2[..., None]
-    return np.stack([-g1 - g2, g1, g2], -2), 0.5 * a2
 
 
 def unit(d: np.ndarray) -> np.ndarray:

@@ -11,11 +11,11 @@ from typing import ClassVar
 import numpy as np
 
 from ..geometry.quadrature import triangle_rule
+from ..geometry.triangles import bary_gradients
 from ..kinds import Space
 from ..system.field import PieceField, StressField, cell_mask
 from ..voigt import stiffnesses
 from .columns import column_at
-from .element import bary_gradients
 
 
 @dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==

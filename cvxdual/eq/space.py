@@ -43,7 +43,7 @@ from ..errors import MeshError, SceneError
 from ..geometry.mesh import Mesh
 from ..geometry.pieces import Pieces
 from ..geometry.quadrature import gauss01
-from ..geometry.triangles import edge_keys
+from ..geometry.triangles import bary_gradients, edge_keys, sub_vertices
 from ..geometry.triangulation import discretize
 from ..linalg.sparse import assemble_blocks
 from ..scene.scene import Scene
@@ -55,14 +55,12 @@ from .columns import FaceIntervals, check_column_data, column_energy, face_inter
 from .edges import MeshEdges, edge_ids, mesh_edges, outward_normals
 from .element import (
     MASS0,
-    bary_gradients,
     divergence_rows,
     edge_blocks,
     inverse2,
     local_basis,
     mapped_values,
     piola,
-    sub_vertices,
     traction_rows,
 )
 

@@ -1,6 +1,7 @@
 """Helpers on arrays of triangles ``(m, 3)`` (node indices) shared by the meshes, their
 refinement and the equilibrium space's edges: one integer key per undirected edge, signed
-areas and edge lengths."""
+areas and edge lengths; and on arrays of corners ``(m, 3, 2)``: the barycentric (Alfeld) split the
+Johnson-Mercier element and the P2 displacement share, barycentric gradients."""
 
 from __future__ import annotations
 
@@ -25,3 +26,18 @@ def edge_lengths(X: np.ndarray) -> np.ndarray:
     """The lengths of the edges of triangles with corners ``X`` ``(m, 3, 2)``: ``(m, 3)``, edge ``j``
     from corner ``j - 1`` to ``j`` (the longest is the triangle's diameter)."""
     return np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2)
+
+
+def sub_vertices(X: np.ndarray) -> np.ndarray:
+    """``(n_T, 3, 3, 2)``: vertices ``(X_i, X_{i+1}, c)`` of the sub-triangles of macro triangles ``X``."""
+    c = np.broadcast_to(X.mean(1, keepdims=True), X.shape)
+    return np.stack([X, np.roll(X, -1, axis=1), c], axis=2)
+
+
+def bary_gradients(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients ``(..., 3, 2)`` of the barycentric functions and areas of triangles ``p (..., 3, 2)``."""
+    d1, d2 = p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]
+    a2 = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+    g1 = np.stack([d2[..., 1], -d2[..., 0]], -1) / a2[..., None]
+    g2 = np.stack([-d1[..., 1], d1[..., 0]], -1) / a2[..., None]
+    return np.stack([-g1 - g2, g1, g2], -2), 0.5 * a2

@@ -2,7 +2,10 @@
 (``boundary``), rigid motions and load balance (``rigid``), the assembly of ``E``, ``A_h``, ``Z``
 and the contact data (``assembly``), and the kinematic side, the P1 displacement: its fast path
 with the warm start from coarser levels (``displacement``) and an independent CVXPY displacement
-QP (``primal``)."""
+QP (``primal``); the kinematic side as a class (``kinematic``: P1 today) and the continuous P2
+displacement on the Alfeld split without contact (``p2``: the element, its condensation and
+assembly, the first step of a second kinematic side); the stress-space interface
+(``stress_space``) and the stress field a solution holds (``field``)."""
 
 import importlib
 
