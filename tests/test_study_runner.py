@@ -219,3 +219,30 @@ def test_finer_reference_compare_and_failures(client, tmp_path):
     assert osqp.status.startswith("failed: SolverError") and "OSQP" in osqp.status
     oom = df[df.case == "oom"].iloc[0]
     assert oom.status.startswith("killed:") and "memory" in oom.status
+
+
+def test_workers_drop_the_heartbeat_race_and_nothing_else():
+    """The local cluster's workers drop dask's shutdown-race line (a heartbeat meeting the stream the
+    retiring scheduler closed; its traceback broke the docs test) and log every other error."""
+    import logging
+
+    from cvxdual.study.runner import HEARTBEAT_RACE, heartbeat_race_plugin
+
+    log = logging.getLogger("distributed.worker")
+    before = list(log.filters)
+    seen = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            seen.append(record.getMessage())
+
+    handler = Keep()
+    log.addHandler(handler)
+    try:
+        heartbeat_race_plugin().setup(worker=None)
+        log.error(HEARTBEAT_RACE)
+        log.error("Unexpected exception during heartbeat. Closing worker.")
+    finally:
+        log.removeHandler(handler)
+        log.filters[:] = before
+    assert seen == ["Unexpected exception during heartbeat. Closing worker."]

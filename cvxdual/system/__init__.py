@@ -4,7 +4,8 @@ and the contact data (``assembly``), and the kinematic side, the P1 displacement
 with the warm start from coarser levels (``displacement``) and an independent CVXPY displacement
 QP (``primal``); the kinematic side as a class (``kinematic``: P1 today) and the continuous P2
 displacement on the Alfeld split without contact (``p2``: the element, its condensation and
-assembly, the first step of a second kinematic side); the stress-space interface
+assembly, the first step of a second kinematic side) with the guaranteed pointwise check of a
+quadratic contact jump against the true gap (``quadratic_gap``); the stress-space interface
 (``stress_space``) and the stress field a solution holds (``field``)."""
 
 import importlib
