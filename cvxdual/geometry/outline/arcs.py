@@ -1,5 +1,6 @@
-"""Curved parts of an outline body's mesh: a free arc's exact polygon and the pieces beyond it
-(section 9 of docs/theory.md), a gmsh arc for a loaded or supported one, finding mesh nodes by
+"""Curved parts of an outline body's mesh, once their polygons are built
+(:meth:`~cvxdual.geometry.outline.build.OutlineBuild.free_arc`): the pieces beyond a free arc
+(section 9 of docs/theory.md) as node triples of the mesh, finding mesh nodes by
 their coordinates (how gmsh's nodes are matched to the points cvxdual placed), and whether the
 polygons that stand for the curves still bound one region (:func:`first_clash`). A valid
 outline's curves keep clear of each other, but their polygons need not: a free arc's chords cut
@@ -13,17 +14,10 @@ is meshed at level ``L`` directly (:mod:`~cvxdual.geometry.outline.loops`)."""
 
 from __future__ import annotations
 
-import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from ...scene.planar import inside, meeting_pairs, point_segment_distance
 from ..triangles import doubled_areas, edge_keys
-from .sizes import arc_edges, arc_size
-
-if TYPE_CHECKING:
-    from .build import OutlineBuild
 
 CLASH_SAMPLES = 256  # points per curved segment when measuring how far a polygon strays from its curve
 
@@ -38,48 +32,8 @@ def match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(bv[order][pos] == av, order[pos], -1)
 
 
-def free_arc(s, concave, build: OutlineBuild) -> list[int]:
-    """A traction-free arc as a polygon inside the body (section 9 of docs/theory.md): chords of
-    a convex arc, or, round a concave one (a hole), the tangents at the chords' ends. The pieces of
-    the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
-    displacement continues there as a P1 function, recorded in ``build.virtual`` for the energy
-    bound: the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
-    ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``). The polygon
-    is the one of ``build.level``; meshed at the level below (``build.step`` 2), gmsh gets every
-    other vertex of it and refinement places the rest."""
-    step, virtual = build.step, build.virtual
-    a0, sweep = s.angles()
-    r = math.dist(s.start, s.center)
-    n = arc_edges(s, build.level)
-    d = sweep / n
-    t = a0 + d * np.arange(n + 1)
-    c = np.array(s.center)
-    on = [tuple(c + r * np.array([math.cos(q), math.sin(q)])) for q in t]
-    on[0], on[-1] = s.start, s.end  # the ends exactly as given: shared with the neighbours
-    # a hole's chords are already the fine polygon's (refinement adds their corners): their length as
-    # size; twice that left slivers by the hole on block-with-hole (quality 0.07, bounds lost)
-    lc = (1 if concave else step) * r * abs(d)
-    if not concave:
-        seg_area = 0.5 * r * r * (abs(d) - math.sin(abs(d)))
-        for j in range(n):
-            virtual["segment"].append((on[j], on[j + 1]))
-            virtual["segment_area"].append(seg_area)
-        return build.polyline(np.array(on), lc)
-    rv = r / math.cos(0.5 * d)
-    corners = [tuple(c + rv * np.array([math.cos(q + 0.5 * d), math.sin(q + 0.5 * d)])) for q in t[:-1]]
-    virtual["corner"] += [(on[j], corners[j], on[j + 1]) for j in range(n)]
-    ids = [build.point(q, lc) for q in on]
-    if step > 1:  # gmsh meshes the chords; refinement puts the corners on them
-        return [build.line(ids[j], ids[j + 1], keep=True, mid=corners[j]) for j in range(n)]
-    curves = []
-    for j in range(n):
-        v = build.point(corners[j], lc)
-        curves += [build.line(ids[j], v, keep=True), build.line(v, ids[j + 1], keep=True)]
-    return curves
-
-
 def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
-    """Node triples and area weights of the free arcs' continuation pieces (:func:`free_arc`):
+    """Node triples and area weights of the free arcs' continuation pieces (``OutlineBuild.free_arc``):
     their points found among gmsh's nodes ``xy`` (local indices ``idx``) by their coordinates."""
     corner = np.asarray(virtual["corner"], float).reshape(-1, 3, 2)
     chord = np.asarray(virtual["segment"], float).reshape(-1, 2, 2)
@@ -96,15 +50,6 @@ def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarra
     t = near[order[np.searchsorted(keys[order], edge_keys(ends[:, 0], ends[:, 1], n))] // 3]
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
-
-
-def gmsh_arc(build: OutlineBuild, s) -> int:
-    """gmsh's circle arc through segment ``s``, its ends at most the arc's size of gmsh's level."""
-    lc = arc_size(s, build.glevel)
-    a = build.point(s.start, min(build.size(s.start), lc))
-    b = build.point(s.end, min(build.size(s.end), lc))
-    c = build.point(s.center, lc)
-    return build.geo.addCircleArc(a, c, b)
 
 
 def first_clash(rings: list, owners: list) -> tuple | None:

@@ -13,8 +13,7 @@ import math
 
 import numpy as np
 
-from .arcs import free_arc, gmsh_arc
-from .sizes import STRIP_ASPECT, SizeField, graded_stops, strip_depth
+from .sizes import STRIP_ASPECT, SizeField, arc_edges, arc_size, graded_stops, strip_depth
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 
@@ -52,7 +51,7 @@ class OutlineBuild:
         self.fixed: list[int] = []  # two-node lines: the strip's edges, the free arcs' polygons, splines
         self.shape: dict[int, tuple] = {}  # every curve's polyline (a line's two ends) and whether a cut may split it
         self.mids: dict[int, tuple] = {}  # a two-node line's node added on refinement (the fine polygon's); None: whole
-        self.virtual = {"corner": [], "segment": [], "segment_area": []}  # the free arcs' pieces (arcs.free_arc)
+        self.virtual = {"corner": [], "segment": [], "segment_area": []}  # the free arcs' pieces (free_arc)
         self.arc_of: dict[int, tuple] = {}  # gmsh's arcs (loaded or supported): centre and radius
         self.chain_pts: list[int] = []  # the points of the chain gmsh gets, left to right
         self.loop: list[int] = []  # signed curve tags of the outer loop, from the right end of the chain
@@ -103,7 +102,54 @@ class OutlineBuild:
             return [self.line(self.point(s.start), self.point(s.end))]
         if name in self.loaded:
             return [self.held_arc(s)]
-        return free_arc(s, concave, self)
+        return self.free_arc(s, concave)
+
+    def free_arc(self, s, concave) -> list[int]:
+        """A traction-free arc as a polygon inside the body (section 9 of docs/theory.md): chords of
+        a convex arc, or, round a concave one (a hole), the tangents at the chords' ends. The pieces of
+        the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
+        displacement continues there as a P1 function, recorded in ``self.virtual`` for the energy
+        bound: the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
+        ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``). The polygon
+        is the one of ``self.level``; meshed at the level below (``self.step`` 2), gmsh gets every
+        other vertex of it and refinement places the rest."""
+        step, virtual = self.step, self.virtual
+        a0, sweep = s.angles()
+        r = math.dist(s.start, s.center)
+        n = arc_edges(s, self.level)
+        d = sweep / n
+        t = a0 + d * np.arange(n + 1)
+        c = np.array(s.center)
+        on = [tuple(c + r * np.array([math.cos(q), math.sin(q)])) for q in t]
+        on[0], on[-1] = s.start, s.end  # the ends exactly as given: shared with the neighbours
+        # a hole's chords are already the fine polygon's (refinement adds their corners): their length as
+        # size; twice that left slivers by the hole on block-with-hole (quality 0.07, bounds lost)
+        lc = (1 if concave else step) * r * abs(d)
+        if not concave:
+            seg_area = 0.5 * r * r * (abs(d) - math.sin(abs(d)))
+            for j in range(n):
+                virtual["segment"].append((on[j], on[j + 1]))
+                virtual["segment_area"].append(seg_area)
+            return self.polyline(np.array(on), lc)
+        rv = r / math.cos(0.5 * d)
+        corners = [tuple(c + rv * np.array([math.cos(q + 0.5 * d), math.sin(q + 0.5 * d)])) for q in t[:-1]]
+        virtual["corner"] += [(on[j], corners[j], on[j + 1]) for j in range(n)]
+        ids = [self.point(q, lc) for q in on]
+        if step > 1:  # gmsh meshes the chords; refinement puts the corners on them
+            return [self.line(ids[j], ids[j + 1], keep=True, mid=corners[j]) for j in range(n)]
+        curves = []
+        for j in range(n):
+            v = self.point(corners[j], lc)
+            curves += [self.line(ids[j], v, keep=True), self.line(v, ids[j + 1], keep=True)]
+        return curves
+
+    def gmsh_arc(self, s) -> int:
+        """gmsh's circle arc through segment ``s``, its ends at most the arc's size of gmsh's level."""
+        lc = arc_size(s, self.glevel)
+        a = self.point(s.start, min(self.size(s.start), lc))
+        b = self.point(s.end, min(self.size(s.end), lc))
+        c = self.point(s.center, lc)
+        return self.geo.addCircleArc(a, c, b)
 
     def spline(self, s) -> list[int]:
         """A polygon through points of the spline, as fine as the sizes there."""
@@ -119,7 +165,7 @@ class OutlineBuild:
 
     def held_arc(self, s) -> int:
         """A supported or loaded arc: gmsh's polygon of it (not certified)."""
-        c = gmsh_arc(self, s)
+        c = self.gmsh_arc(s)
         self.shape[c] = (s.sample(64), False)
         self.arc_of[c] = (np.asarray(s.center, float), math.dist(s.start, s.center))
         return c

@@ -31,7 +31,7 @@ class RestMesh:
     points: np.ndarray
     triangles: np.ndarray
     parts: dict
-    virtual_nodes: np.ndarray  # (m, 3): the P1 function continued beyond a free arc (arcs.free_arc)
+    virtual_nodes: np.ndarray  # (m, 3): the P1 function continued beyond a free arc (build.OutlineBuild.free_arc)
     virtual_weight: np.ndarray  # (m,): the area it covers
 
 
