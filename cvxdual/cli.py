@@ -77,6 +77,8 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
         b = s["bounds"]
         lines.append(f"certified bounds: {b['energy_lower']:.6g} <= J(u) <= {b['energy_upper']:.6g}; "
                      f"error bound sqrt(2G) = {b['error_bound']:.3g}"
+                     + ("" if b["error_bound_rel"] is None else f" ({b['error_bound_rel']:.3%} of the stress's energy "
+                        f"norm, {b['kinematic'].upper()} displacement)")
                      + ("" if b["guaranteed"] else f" (not guaranteed: {'; '.join(b['reasons'])})"))
     if written:
         took = "" if t_write is None else f" in {t_write:.2f} s"
@@ -117,7 +119,7 @@ def _cmd_solve(args) -> int:
             # killed runs' leftovers now, not after a solve that may take minutes
             sweep_leftovers(check_output_dir(out))
         sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
-                    max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose)
+                    max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose, kinematic=args.kinematic)
     written, t_write = [], None
     if out is not None:
         with phase("write", start=f"outputs to {out}/" if plots else None) as p:
@@ -202,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "stresses with certified bounds, frictionless (default: p0)")
     s.add_argument("--bounds", action="store_true", help="with p0: also certify the displacement against "
                    "equilibrium stresses on the same mesh")
+    s.add_argument("--kinematic", default="p2", choices=("p1", "p2"),
+                   help="the displacement of the bounds' upper side: p2, continuous P2 on the barycentric split "
+                   "(sharp, free of locking), or p1, the P1 displacement of the fast path (default: p2)")
     s.add_argument("--out", default=None, help="output directory (default: out/<scene>)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.grading=4 (repeatable)")

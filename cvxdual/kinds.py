@@ -34,3 +34,18 @@ class Status(StrEnum):
 
     OPTIMAL = "optimal"
     OPTIMAL_INACCURATE = "optimal_inaccurate"
+
+
+class Kinematic(StrEnum):
+    """The kinematic sides of a certificate, by the names users write (:mod:`cvxdual.system.kinematic`)."""
+
+    P1 = "p1"
+    P2 = "p2"
+
+    @classmethod
+    def parse(cls, name) -> Kinematic:
+        try:
+            return cls(str(name).lower())
+        except ValueError:
+            raise CvxdualError(f"unknown kinematic side {str(name)[:40]!r}; choose 'p1' or 'p2'",
+                               cli=f"unknown --kinematic {str(name)[:40]!r}; choose p1 or p2") from None

@@ -27,17 +27,20 @@ from .scene import Scene
 from .sizing import check_size
 from .solution import Solution
 from .system.assembly import System, assemble
+from .system.kinematic import kinematic_side
 from .system.stress_space import StressSpace
 from .validate import one_line, short
 
 log = logging.getLogger(__name__)
 
-def space_of(name) -> StressSpace:
-    """The :class:`~cvxdual.system.stress_space.StressSpace` named ``name`` (:meth:`Space.parse`)."""
+def space_of(name, kinematic: str = "p2") -> StressSpace:
+    """The :class:`~cvxdual.system.stress_space.StressSpace` named ``name`` (:meth:`Space.parse`); the
+    equilibrium space's certificate on the kinematic side ``kinematic`` (``"p2"`` or ``"p1"``)."""
+    side = kinematic_side(kinematic)
     if Space.parse(name) is Space.P0:
         return P0Stresses()
     from .eq.run import EquilibriumStresses  # the equilibrium space loads on first use
-    return EquilibriumStresses()
+    return EquilibriumStresses(side)
 
 
 def as_scene(scene) -> Scene:
@@ -73,7 +76,7 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
           check: bool = True, warm_start: bool = True, stress_space: str = "p0", bounds: bool = False,
           max_memory=None, fallback: bool = True, time_limit: float | None = None, verbose: bool = False,
-          **solver_options) -> Solution:
+          kinematic: str = "p2", **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.activeset`
@@ -85,6 +88,9 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
     stresses, column stresses on curved pieces, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
+    ``kinematic`` is the displacement the bounds' upper side uses: ``"p2"`` (continuous P2 on the
+    Alfeld split, sharp and free of locking; the default) or ``"p1"`` (the P1 displacement of the
+    fast path, for comparison).
     ``check`` false returns solutions that fail the accuracy checks (for studies of them).
     Where the fast path (or the default solver) fails (its checks, a cycling active set), the
     CVXPY path with Clarabel solves instead, unless ``fallback`` is false; ``solution.solver.fallback``
@@ -101,16 +107,16 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     deadline.fast = str(solver).upper() == FAST  # the advice of a time-out before the solver is resolved
     with deadline.enforced():  # from the start: the size probe's meshes count too
         return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds,
-                      max_memory, fallback, verbose, solver_options)
+                      max_memory, fallback, verbose, kinematic, solver_options)
 
 
 def _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds, max_memory,
-           fallback, verbose, solver_options) -> Solution:
+           fallback, verbose, kinematic, solver_options) -> Solution:
     scene = as_scene(scene)
     gmsh0 = gmsh_seconds()
     chosen = solver is None and not solver_options  # options name their solver: Clarabel's, as always
     triangulation = check_triangulation(triangulation)
-    space = space_of(stress_space)
+    space = space_of(stress_space, kinematic)
     level = check_level(scene.mesh.default_level if level is None else level)
     if scene.friction is not None:
         if not space.frictional or bounds:
@@ -130,8 +136,8 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
     if solver == FAST and solver_options:
         raise SolverError(f"the fast path takes no solver options, got {', '.join(sorted(solver_options))}; "
                           "drop them or choose a CVXPY solver such as CLARABEL")
-    check_size(scene, level, solver == FAST, space.name, bounds, max_memory)
-    attempt = partial(_attempt, scene, triangulation, level, space, bounds, check=check,
+    check_size(scene, level, solver == FAST, space.name, bounds, max_memory, kinematic)
+    attempt = partial(_attempt, scene, triangulation, level, space, bounds, kinematic, check=check,
                       warm_start=warm_start, deadline=deadline, verbose=verbose)
     try:
         try:
@@ -144,7 +150,7 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
             reason = one_line(e.reason or e, 120)  # its advice (use Clarabel) is what follows
             name = "the fast path" if solver == FAST else solver
             try:
-                check_size(scene, level, False, space.name, bounds, max_memory)
+                check_size(scene, level, False, space.name, bounds, max_memory, kinematic)
                 log.info("%s failed (%s); solving with %s", name, reason, DEFAULT_SOLVER)
                 sol = attempt(DEFAULT_SOLVER)
             except CvxdualError as e2:  # both paths failed: both reasons, short, and what is left to try
@@ -173,12 +179,13 @@ def _gmsh_timed(sol: Solution, scene: Scene, before: float) -> Solution:
     return replace(sol, timings={**sol.timings, "gmsh": gmsh_seconds() - before})
 
 
-def _attempt(scene: Scene, triangulation: str, level: int, space: StressSpace, bounds: bool, solver: str,
-             **options) -> Solution:
+def _attempt(scene: Scene, triangulation: str, level: int, space: StressSpace, bounds: bool, kinematic: str,
+             solver: str, **options) -> Solution:
     """One run with ``solver`` in ``space``, and bounds where asked for and the space gives none."""
     sol = space.run(scene, triangulation, level, solver, **options)
     if bounds and not space.certifies:
         with phase("bounds", options.get("deadline")) as p:
-            sol = space_of(Space.EQ).certify(sol)
-            p.detail = "the displacement against the equilibrium stresses of the same mesh"
+            sol = space_of(Space.EQ, kinematic).certify(sol)
+            side = kinematic_side(kinematic).name.upper()
+            p.detail = f"the {side} displacement against the equilibrium stresses of the same mesh"
     return sol

@@ -252,8 +252,11 @@ class Bounds(Record):
     its non-negative terms), ``gap_identity`` (``J(v) + L(u0) + S(sigma)``), ``error_bound =
     sqrt(2 G)``, ``complementary_energy``, ``contributions`` (:class:`BoundContributions`),
     ``data_oscillation``, ``residuals`` (relative violation per constraint block),
-    ``displacement`` ``v`` ``(n_nodes, 2)`` [L], ``displacement_fix`` (:class:`DisplacementFix`),
-    ``guaranteed`` and the ``reasons`` when not."""
+    ``displacement`` ``v`` [L] (P1: nodal values ``(n_nodes, 2)``; P2: a
+    :class:`~cvxdual.system.p2_displacement.P2Displacement`), ``displacement_fix`` (:class:`DisplacementFix`),
+    ``guaranteed`` and the ``reasons`` when not, the ``kinematic`` side of ``v`` (``"p1"``, ``"p2"``) and
+    ``error_bound_rel``, ``sqrt(2 G)`` over the stress's energy norm ``sqrt(2 S_A(sigma))`` (it bounds the
+    relative energy error of the stress and of the displacement)."""
 
     energy_upper: float
     energy_lower: float
@@ -266,7 +269,9 @@ class Bounds(Record):
     # a plain dict: a per-name map whose names are the constraint blocks checked (those of
     # eq.bounds.constraint_blocks or edge_constraints), an open set read by iterating it
     residuals: dict
-    displacement: np.ndarray
+    displacement: object
     displacement_fix: DisplacementFix
     guaranteed: bool
     reasons: tuple[str, ...]
+    kinematic: str = "p1"
+    error_bound_rel: float | None = None

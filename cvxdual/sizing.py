@@ -23,15 +23,16 @@ from dataclasses import dataclass
 from .errors import TooLargeError
 from .geometry.mesh import mesh_size
 from .geometry.triangulation import column_breaks
-from .kinds import Space
+from .kinds import Kinematic, Space
 from .memory import available_memory
 from .validate import short
 
 BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver loaded (measured: 120-180 MB)
 # Peak resident bytes per mesh triangle, measured at levels 2-6 (studies/memory.py, reports/memory.md),
 # rounded up. "cvxpy": the P0 dual through CVXPY and Clarabel; "fast": the P0 fast path; on top
-# of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy").
-BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3}
+# of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy"), and the
+# P2 kinematic side of a certificate ("p2").
+BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3, "p2": 12e3}
 ENV = "CVXDUAL_MAX_MEMORY"
 PLAUSIBLE_MEMORY = 1e14  # bytes: more than any one machine has (100 TB)
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,
@@ -56,13 +57,16 @@ class Estimate:
         return f"about {_count(self.triangles)} triangles, {_count(2 * self.nodes)} dofs, {_bytes(self.bytes)}"
 
 
-def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False) -> Estimate:
+def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False,
+             kinematic: str = "p2") -> Estimate:
     """Estimated triangles, nodes and peak memory of solving ``scene`` at ``level``."""
     n = mesh_size(scene, level, column_breaks(scene))
     space = Space.parse(stress_space)
     rows = RUN_ROWS[space, bool(fast)]
     if bounds and space is Space.P0:  # bounds of a P0 run: the equilibrium stresses by the fast route
         rows += ("eq",)
+    if (bounds or space is Space.EQ) and Kinematic.parse(kinematic) is Kinematic.P2:
+        rows += ("p2",)
     cost = sum(BYTES_PER_TRIANGLE[r] for r in rows)
     return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
 
@@ -85,16 +89,16 @@ def parse_size(value) -> float:
 
 
 def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bool = False,
-               max_memory=None) -> Estimate:
+               max_memory=None, kinematic: str = "p2") -> Estimate:
     """The :func:`estimate`, or :class:`~cvxdual.errors.TooLargeError` if it exceeds the limit."""
-    est = estimate(scene, level, fast, stress_space, bounds)
+    est = estimate(scene, level, fast, stress_space, bounds, kinematic)
     given = max_memory if max_memory is not None else os.environ.get(ENV)
     limit = parse_size(given) if given is not None else available_memory()
     if est.bytes > limit:
         where = "the given limit" if given is not None else "the memory available"
         what = f"{short(scene.name, 40)} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"
-        lower = _largest_level(scene, level, fast, stress_space, bounds, limit)
-        fits = _largest_columns(scene, level, fast, stress_space, bounds, limit)
+        lower = _largest_level(scene, level, fast, stress_space, bounds, kinematic, limit)
+        fits = _largest_columns(scene, level, fast, stress_space, bounds, kinematic, limit)
         # past what any machine has, raising the limit is no fix (a hostile level or column count)
         plausible = est.bytes <= PLAUSIBLE_MEMORY
         raise_api = f" or raise the limit with max_memory='64GB' (or {ENV})" if plausible else ""
@@ -110,8 +114,9 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
             raise TooLargeError(f"{what}: give fewer mesh columns (mesh.columns = {fits} fits at level {level})"
                                 + raise_api, cli=f"{what}: give fewer mesh columns (mesh.columns = {fits} fits "
                                 f"at level {level})" + raise_cli)
+        run = (fast, stress_space, bounds, kinematic, limit)
         both = next(((lv, n) for lv in reversed(range(min(level, 12)))
-                     if (n := _largest_columns(scene, lv, fast, stress_space, bounds, limit)) is not None), None)
+                     if (n := _largest_columns(scene, lv, *run)) is not None), None)
         if both is not None:
             fix = f"give fewer mesh columns and a lower level (mesh.columns = {both[1]} fits at level {both[0]})"
             raise TooLargeError(f"{what}: {fix}{raise_api}", cli=f"{what}: {fix.replace('level (', '--level (')}"
@@ -122,14 +127,14 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
     return est
 
 
-def _largest_columns(scene, level, fast, stress_space, bounds, limit) -> int | None:
+def _largest_columns(scene, level, fast, stress_space, bounds, kinematic, limit) -> int | None:
     """The largest ``mesh.columns`` below the scene's whose mesh fits ``limit`` at ``level``, or
     ``None`` if even one column does not."""
     from dataclasses import replace
 
     def fits(n: int) -> bool:
         return estimate(replace(scene, mesh=replace(scene.mesh, columns=n)), level, fast, stress_space,
-                        bounds).bytes <= limit
+                        bounds, kinematic).bytes <= limit
 
     lo, hi = 1, scene.mesh.columns  # fits(lo) is checked, fits(hi) is false
     if hi <= 1 or not fits(lo):
@@ -154,8 +159,9 @@ def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
-def _largest_level(scene, level, fast, stress_space, bounds, limit) -> int | None:
-    fits = [L for L in range(min(level, 12)) if estimate(scene, L, fast, stress_space, bounds).bytes <= limit]
+def _largest_level(scene, level, fast, stress_space, bounds, kinematic, limit) -> int | None:
+    fits = [L for L in range(min(level, 12))
+            if estimate(scene, L, fast, stress_space, bounds, kinematic).bytes <= limit]
     return max(fits) if fits else None
 
 

@@ -35,7 +35,8 @@ TOLERANCES = {"equilibrium": 1e-6, "constitutive": 1e-4, "complementarity": 1e-5
 # relative to the stress scale (the exactness post-step brings them to ~1e-14)
 EQ_TOLERANCES = {"admissibility": 1e-9, "penetration": 1e-12}
 SPACE_TOLERANCES = {Space.P0: TOLERANCES, Space.EQ: EQ_TOLERANCES}
-BOUND_KEYS = ("energy_upper", "energy_lower", "gap", "error_bound", "guaranteed", "reasons", "data_oscillation")
+BOUND_KEYS = ("energy_upper", "energy_lower", "gap", "error_bound", "error_bound_rel", "kinematic", "guaranteed",
+              "reasons", "data_oscillation")
 
 # contact.csv and Solution.contact_table(), one row per pair: tangential_force is the x force of
 # the upper body on the lower one (0 without friction); slip the relative tangential

@@ -14,6 +14,7 @@ from test_eq_output import EXACT, _edges_of_cells, check_vtu
 import cvxdual as cd
 from cvxdual.cli import main
 from cvxdual.eq.bounds import admissibility_residuals, contact_slack, gap_curvature_bound
+from cvxdual.eq.kinematic_p2 import p2_slack
 from cvxdual.eq.space import EquilibriumSpace
 from cvxdual.errors import SceneError
 
@@ -22,8 +23,8 @@ TRIS = ["type1", "type2"]
 
 
 @functools.lru_cache(maxsize=None)
-def solved(scene: str, tri: str, level: int, solver: str = "fast"):
-    return cd.solve(scene, tri, level, solver, stress_space="eq", fallback=False)
+def solved(scene: str, tri: str, level: int, solver: str = "fast", kinematic: str = "p2"):
+    return cd.solve(scene, tri, level, solver, stress_space="eq", fallback=False, kinematic=kinematic)
 
 
 @pytest.mark.parametrize("tri", TRIS)
@@ -259,7 +260,7 @@ def test_composite_curvature_bounds_take_each_piece_on_its_own_side():
 def test_slack_bound_is_below_every_sample(scene):
     """The admissible displacement's slack ``eps - [v]`` is at least its guaranteed bound at every
     point of every contact edge (sampled densely), and the bound is non-negative."""
-    sol = solved(scene, "type2", 1)
+    sol = solved(scene, "type2", 1, kinematic="p1")
     sp, v = sol.space, sol.displacement
     _, smin, exact = contact_slack(sp, v)
     assert exact and smin.min() >= 0
@@ -275,6 +276,30 @@ def test_slack_bound_is_below_every_sample(scene):
     curv = sc.upper.face.curvature(xs) - sc.lower.face.curvature(xs) + sc.gap_profile.curvature(xs)
     M = gap_curvature_bound(sp, x[:-1], x[1:])
     assert np.all(curv.max(1) <= M + 1e-12 * np.abs(M))  # the bound holds at every sample
+
+
+@pytest.mark.parametrize("tri", TRIS)
+@pytest.mark.parametrize("scene", CURVED)
+def test_p2_slack_bound_is_below_every_sample(scene, tri):
+    """The P2 displacement of the bounds: its quadratic jump (from the vertices and the midpoints)
+    stays below the true gap at every sample of every contact edge, its guaranteed bound is below
+    every sample and non-negative; and the solve needed no correction beyond rounding (its
+    Bernstein constraints are sufficient)."""
+    sol = solved(scene, tri, 1)
+    sp, v, fix = sol.space, sol.bounds["displacement"], sol.bounds["displacement_fix"]
+    s, smin = p2_slack(sp, v)
+    assert smin.min() >= 0
+    # 1e-12 of the displacement: the rounding-level shifts of restore_admissible (measured <= 1e-12)
+    assert fix["max_shift"] <= 1e-12 * fix["displacement_scale"]
+    x, jump = v.layout.pair_x, v.jumps()
+    u = np.linspace(0, 1, 4001)
+    xs = x[0:-1:2, None] + u[None, :] * (x[2::2] - x[0:-1:2])[:, None]
+    N = np.stack([(1 - u) * (1 - 2 * u), 4 * u * (1 - u), u * (2 * u - 1)], 1)  # P2 on [0, 1]
+    q = np.stack([jump[0:-1:2], jump[1::2], jump[2::2]], 1) @ N.T
+    sampled = sp.scene.gap_at(xs) - q
+    # a lower bound: never above the samples beyond rounding of the gap's values (1e-12 of it)
+    assert np.all(sampled.min(1) >= smin - 1e-12 * np.abs(sp.scene.gap_at(x)).max())
+    assert sampled.min() >= -1e-12 * np.abs(sp.scene.gap_at(x)).max()
 
 
 def test_perturbed_column_field_is_refused_by_the_checks():

@@ -24,6 +24,7 @@ from cvxdual.records import (
     ExactErrors,
     Record,
 )
+from cvxdual.system.p2_displacement import P2Displacement
 
 # the keys, in order, of the dicts the records replaced (as the producers built them)
 P0_CONTACT = ["x", "gap", "relative_displacement", "force", "pressure", "active", "tangential_force", "slip", "stick",
@@ -31,7 +32,8 @@ P0_CONTACT = ["x", "gap", "relative_displacement", "force", "pressure", "active"
 EQ_CONTACT = ["x", "gap", "relative_displacement", "force", "pressure", "active", "edge_pressure", "tangential_force",
               "slip", "stick", "n_active", "x_min", "x_max", "max_pressure", "total_force"]
 BOUNDS = ["energy_upper", "energy_lower", "gap", "gap_identity", "error_bound", "complementary_energy", "contributions",
-          "data_oscillation", "residuals", "displacement", "displacement_fix", "guaranteed", "reasons"]
+          "data_oscillation", "residuals", "displacement", "displacement_fix", "guaranteed", "reasons", "kinematic",
+          "error_bound_rel"]
 CONTRIBUTIONS = ["element", "sub", "column", "contact", "continuation"]
 FIX = ["max_shift", "n_shifted", "min_slack_before", "min_slack", "exact_min", "support_violation",
        "displacement_scale"]
@@ -143,6 +145,9 @@ def test_records_round_trip(kind):
             v, w = rec[k], other[k]
             if isinstance(v, np.ndarray):
                 np.testing.assert_array_equal(w, v)
+            elif isinstance(v, P2Displacement):  # the P2 bounds' displacement: its values
+                np.testing.assert_array_equal(w.q, v.q)
+                np.testing.assert_array_equal(w.interior, v.interior)
             elif not isinstance(v, (Record, dict)):
                 assert w == v or (v != v and w != w), k  # NaN == NaN here
 

@@ -46,7 +46,7 @@ def test_other_solvers_failure_advises_clarabel():
 def test_fast_then_clarabel_failure_is_one_short_line(monkeypatch):
     """Both paths fail: the line names both reasons, not the fast path's advice (use Clarabel),
     which the fallback already followed, and stays short."""
-    def attempt(scene, triangulation, level, stress_space, bounds, solver, **options):
+    def attempt(scene, triangulation, level, stress_space, bounds, kinematic, solver, **options):
         if solver == FAST:
             why = "eq fast path: the condensed system is singular or ill-conditioned (relative residual 3.1e-02)"
             raise SolverError(f"{why}; use the CVXPY path (EquilibriumModel, or solver='CLARABEL')",

@@ -6,6 +6,7 @@ quantities (``contact``), the CVXPY model (``model``), the fast route (``fast``)
 
 import importlib
 
+from . import kinematic_p2  # noqa: F401 - registers the P2 displacement's certificate terms
 from .space import EquilibriumSpace
 
 _LAZY = {"EquilibriumModel": ".model"}  # loads CVXPY: on first use

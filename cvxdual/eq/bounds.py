@@ -16,6 +16,9 @@ polynomial gaps of degree <= 18, e.g. the parabola ``x^2 / 2R``).
 
 from __future__ import annotations
 
+from functools import singledispatch
+from typing import NamedTuple
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -25,6 +28,7 @@ from ..geometry.triangles import bary_gradients
 from ..linalg.sparse import assemble_blocks
 from ..records import BoundContributions, Bounds, DisplacementFix, ExactErrors
 from ..system.boundary import supports
+from ..system.quadratic_gap import gap_curvature
 from ..voigt import VOIGT_WEIGHT, compliances, stiffnesses
 from .columns import CONCAVE1, column_at, column_gap
 from .edges import outward_normals
@@ -182,18 +186,10 @@ def admissibility_residuals(space: EquilibriumSpace, sigma: np.ndarray, blocks: 
 
 # -- the displacement side ---------------------------------------------------------------
 
-# rounding of the closed forms of the curvature bounds: they are widened by this fraction
-CURVATURE_MARGIN = 1e-9
-
-
 def gap_curvature_bound(space: EquilibriumSpace, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-    """A guaranteed upper bound ``M`` of the gap's second derivative on each interval
-    ``[x0, x1]``: ``eps = f_u - f_l + g`` (upper face, lower face, gap profile), so
-    ``eps'' <= max f_u'' - min f_l'' + max g''`` (each profile's ``curvature_range``, from its
-    closed form), widened by :data:`CURVATURE_MARGIN` of the terms for their rounding."""
-    sc = space.scene
-    (_, hu), (ll, _), (_, hg) = (p.curvature_range(x0, x1) for p in (sc.upper.face, sc.lower.face, sc.gap_profile))
-    return hu - ll + hg + CURVATURE_MARGIN * (np.abs(hu) + np.abs(ll) + np.abs(hg))
+    """A guaranteed upper bound ``M`` of the gap's second derivative on each interval ``[x0, x1]``
+    (:func:`~cvxdual.system.quadratic_gap.gap_curvature`)."""
+    return gap_curvature(space.scene, x0, x1)
 
 
 def contact_slack(space: EquilibriumSpace, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -275,6 +271,18 @@ def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
     F = np.array([b.body_force for b in space.scene.bodies])[space.body]
     work = float(np.sum(area * np.einsum("tk,tk->t", F, v[space.tri].mean(1))))
     ed = space.edges
+    b, t = edge_tractions(space)
+    v0, v1 = v[ed["lo"][b]], v[ed["hi"][b]]
+    ell = ed["length"][b] / 6.0
+    work += float(np.sum(ell * (np.einsum("bi,bi->b", t[0], 2 * v0 + v1) + np.einsum("bi,bi->b", t[1], v0 + 2 * v1))))
+    return work
+
+
+def edge_tractions(space: EquilibriumSpace) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The boundary edges ``b`` of the straight triangles and the traction ``sigma n_out`` of the
+    space's fixed data at their ``lo`` and ``hi`` ends (``[t_lo, t_hi]``, ``(m, 2)`` each; linear
+    between; zero where the traction is free)."""
+    ed = space.edges
     b = ed["boundary"]
     _, s_o = outward_normals(ed, space.X, space.mesh.points, b)
     a = ed["axis"][b]  # the frame of the edge's dofs
@@ -283,10 +291,7 @@ def load_work(space: EquilibriumSpace, v: np.ndarray) -> float:
     for e in range(2):  # traction at the global ends from the fixed dofs (free ones are 0 in z_fix)
         dn, dt = space.z_fix[4 * b + 2 * e], space.z_fix[4 * b + 2 * e + 1]
         t.append(s_o[:, None] * (dn[:, None] * a + dt[:, None] * ta))  # sigma n_out = s_o sigma n_g
-    v0, v1 = v[ed["lo"][b]], v[ed["hi"][b]]
-    ell = ed["length"][b] / 6.0
-    work += float(np.sum(ell * (np.einsum("bi,bi->b", t[0], 2 * v0 + v1) + np.einsum("bi,bi->b", t[1], v0 + 2 * v1))))
-    return work
+    return b, t
 
 
 def slab_strains(space: EquilibriumSpace, v: np.ndarray) -> np.ndarray:
@@ -332,12 +337,17 @@ def contact_tractions(space: EquilibriumSpace, sigma: np.ndarray, blocks: dict |
     return (blocks["sign"][0] @ field_values(sigma, g)).reshape(-1, 2)
 
 
-def _contact_integrals(space: EquilibriumSpace, p: np.ndarray, v: np.ndarray | None) -> np.ndarray:
-    """``int p eps`` (``v`` None) or ``int p (eps - [v])`` per contact edge, Gauss ``N_GAUSS``."""
+def contact_integrals(space: EquilibriumSpace, p: np.ndarray, v: np.ndarray | None,
+                      jump: np.ndarray | None = None) -> np.ndarray:
+    """``int p eps`` (``v`` None) or ``int p (eps - [v])`` per contact edge for P1 nodal values ``v``,
+    or, given ``jump`` ``(n_c, g)`` (at the points of ``gauss01(N_GAUSS)`` on each edge), for that
+    jump; Gauss ``N_GAUSS``."""
     u, w = gauss01(N_GAUSS)
     x0, x1 = space.contact_x[:, :1], space.contact_x[:, 1:]
     f = space.scene.gap_at(x0 + u[None, :] * (x1 - x0))
-    if v is not None:
+    if jump is not None:
+        f = f - jump
+    elif v is not None:
         up, lo = space.mesh.pairs.T
         jump = v[lo, 1] - v[up, 1]
         f = f - (jump[:-1, None] * (1 - u) + jump[1:, None] * u)
@@ -345,14 +355,53 @@ def _contact_integrals(space: EquilibriumSpace, p: np.ndarray, v: np.ndarray | N
     return (pq * f) @ w * (x1 - x0)[:, 0]
 
 
-def _sub_energy(space: EquilibriumSpace, d: np.ndarray) -> np.ndarray:
-    """``1/2 int d:A d`` on each sub-triangle ``(n_T, 3)`` for vertex values ``d (n_T, 3, 3, 3)``."""
+def sub_energy(space: EquilibriumSpace, d: np.ndarray, matrices: np.ndarray | None = None) -> np.ndarray:
+    """``1/2 int d:A d`` on each sub-triangle ``(n_T, 3)`` for vertex values ``d (n_T, 3, 3, 3)`` of a
+    field linear on each (``A`` the compliance, or ``matrices`` ``(n_bodies, 3, 3)``: the stiffness
+    for a strain's energy)."""
     _, area = space.sub_geometry
-    A = compliances(space.scene)[space.body]
+    A = (compliances(space.scene) if matrices is None else matrices)[space.body]
     return 0.5 * area * (d * ((MASS0 @ d) @ A[:, None])).sum((2, 3))  # matmul: einsum is 5x slower here
 
 
-def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.ndarray,
+class KinematicTerms(NamedTuple):
+    """What the certificate takes from a displacement: ``v`` made pointwise admissible and how
+    (``fix``), the guaranteed lower bound of the slack on each contact edge (``slack_min``) and
+    whether it is rigorous (``exact_min``), ``G``'s terms ``1/2 ||sigma - C e(v)||_A^2`` per
+    sub-triangle (``sub``) and slab (``column``), ``int p (eps - [v])`` per contact edge
+    (``contact``), ``J(v)`` (``energy``) and the energy beyond the mesh (``beyond``)."""
+
+    v: object
+    fix: DisplacementFix
+    slack_min: np.ndarray
+    exact_min: bool
+    sub: np.ndarray
+    column: np.ndarray
+    contact: np.ndarray
+    energy: float
+    beyond: np.ndarray
+
+
+@singledispatch
+def kinematic_terms(displacement, space: EquilibriumSpace, sig: np.ndarray, g: np.ndarray, p: np.ndarray,
+                    fix: bool) -> KinematicTerms:
+    """The :class:`KinematicTerms` of a displacement against vertex stresses ``sig`` ``(n_T, 3, 3, 3)``,
+    column values ``g`` and contact pressures ``p`` ``(n_c, 2)``: here of P1 nodal values (an array);
+    the P2 side registers its own (:mod:`cvxdual.eq.kinematic_p2`)."""
+    if not isinstance(displacement, np.ndarray):
+        raise TypeError(f"no certificate for a displacement of type {type(displacement).__name__}")
+    v, fixinfo = (admissible_displacement(space, displacement) if fix
+                  else (np.asarray(displacement, float), DisplacementFix()))
+    _, smin, exact_min = contact_slack(space, v)
+    stiff = stiffnesses(space.scene)
+    ce = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
+    sub = sub_energy(space, sig - ce[:, None, None, :])
+    column = column_gap(space, g, np.einsum("sij,sj->si", stiff[space.pieces.slabs.body], slab_strains(space, v)))
+    return KinematicTerms(v, fixinfo, smin, exact_min, sub, column, contact_integrals(space, p, v),
+                          primal_energy(space, v), continuation_energy(space, v))
+
+
+def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement,
                      fix: bool = True, blocks: dict | None = None, g: np.ndarray | None = None) -> Bounds:
     """Two-sided energy bounds and the error bound of the field of vertex values ``sigma``
     (``27 n_T`` numbers) and column values ``g`` ``(n_col, 2)`` (curved faces), and a displacement
@@ -371,19 +420,12 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
     sig = np.asarray(sigma, float).reshape(space.n_tri, 3, 3, 3)
     g = np.zeros((0, 2)) if g is None else np.asarray(g, float).reshape(-1, 2)
     res = admissibility_residuals(space, sig, blocks, g)
-    v, fixinfo = (admissible_displacement(space, displacement) if fix
-                  else (np.asarray(displacement, float), DisplacementFix()))
-    _, smin, exact_min = contact_slack(space, v)
     p = -contact_tractions(space, sig, blocks, g)
-    stiff = stiffnesses(space.scene)
-    ce = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
-    sub = _sub_energy(space, sig - ce[:, None, None, :])
-    column = column_gap(space, g, np.einsum("sij,sj->si", stiff[space.pieces.slabs.body], slab_strains(space, v)))
-    contact = _contact_integrals(space, p, v)
-    comp = float(_sub_energy(space, sig).sum()) + 0.5 * float(g.ravel() @ (space.column_energy_matrix() @ g.ravel()))
-    pe = float(_contact_integrals(space, p, None).sum())
-    J = primal_energy(space, v)
-    beyond = continuation_energy(space, v)
+    kin = kinematic_terms(displacement, space, sig, g, p, fix)
+    v, fixinfo, smin, exact_min = kin.v, kin.fix, kin.slack_min, kin.exact_min
+    sub, column, contact, J, beyond = kin.sub, kin.column, kin.contact, kin.energy, kin.beyond
+    comp = float(sub_energy(space, sig).sum()) + 0.5 * float(g.ravel() @ (space.column_energy_matrix() @ g.ravel()))
+    pe = float(contact_integrals(space, p, None).sum())
     G = float(sub.sum() + column.sum() + contact.sum() + beyond.sum())
     osc = data_oscillation(space)
     reasons = []
@@ -413,7 +455,9 @@ def certified_bounds(space: EquilibriumSpace, sigma: np.ndarray, displacement: n
                   contributions=BoundContributions(element=sub.sum(1), sub=sub, column=column, contact=contact,
                                                    continuation=beyond),
                   data_oscillation=osc, residuals=res, displacement=v, displacement_fix=fixinfo,
-                  guaranteed=not reasons, reasons=tuple(reasons))
+                  guaranteed=not reasons, reasons=tuple(reasons),
+                  kinematic="p1" if isinstance(v, np.ndarray) else "p2",
+                  error_bound_rel=float(np.sqrt(2.0 * max(G, 0.0)) / np.sqrt(2.0 * comp)) if comp > 0 else None)
 
 
 def data_oscillation(space: EquilibriumSpace) -> float:
@@ -446,14 +490,21 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
     P = space.sub_points()  # (n_sub, 3, 2)
     _, area = bary_gradients(P)
     sub_body = np.repeat(space.body, 3)
-    ce = np.einsum("tij,tj->ti", stiffnesses(space.scene)[space.body], strains(space, displacement))
+    stiff = stiffnesses(space.scene)
+    if isinstance(displacement, np.ndarray):
+        ce = np.einsum("tij,tj->ti", stiff[space.body], strains(space, displacement))
+    else:  # a P2 displacement: C e(v) linear on each sub-triangle, by its vertex values
+        ce_v = np.einsum("tij,tsaj->tsai", stiff[space.body], displacement.sub_strains(space.X)).reshape(-1, 3, 3)
     sig = np.asarray(sigma, float).reshape(-1, 3, 3)
     acc = np.zeros(6)
     step = max(1, CHUNK_POINTS // len(w))
     for lo in range(0, len(P), step):
         s = slice(lo, lo + step)
         pts, field = lam @ P[s], lam @ sig[s]  # (m, q, 2), (m, q, 3)
-        kin = np.broadcast_to(ce[np.arange(lo, min(lo + step, len(P))) // 3][:, None, :], field.shape)
+        if isinstance(displacement, np.ndarray):
+            kin = np.broadcast_to(ce[np.arange(lo, min(lo + step, len(P))) // 3][:, None, :], field.shape)
+        else:
+            kin = lam @ ce_v[s]
         wq = 2.0 * area[s, None] * w[None, :]
         _accumulate_errors(space, exact, sub_body[s], pts, field, kin, wq, acc)
     if len(space.pieces.slabs):
@@ -462,7 +513,9 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
         gx, _ = column_at(space, g, None, sp_, si)
         sbody = space.pieces.slabs.body[si]
         field = np.stack([np.zeros(len(gx)), gx, np.zeros(len(gx))], 1)
-        kin = np.einsum("sij,sj->si", stiffnesses(space.scene)[sbody], slab_strains(space, displacement)[si])
+        es = (slab_strains(space, displacement)[si] if isinstance(displacement, np.ndarray)
+              else displacement.slab_strains(si, sp_[:, 0]))
+        kin = np.einsum("sij,sj->si", stiff[sbody], es)
         _accumulate_errors(space, exact, sbody, sp_[:, None], field[:, None], kin[:, None], sw[:, None], acc)
     dd, rr, dAd, rAr, eAe, ee = acc
     return ExactErrors(l2=float(np.sqrt(dd)), l2_rel=float(np.sqrt(dd / rr)), stress_A=float(np.sqrt(dAd)),

@@ -90,13 +90,20 @@ def slab_interval(mesh: Mesh, pieces: Pieces, faces: FaceIntervals) -> np.ndarra
     return out
 
 
+def slab_abscissae(pieces: Pieces) -> np.ndarray:
+    """``(n_slabs, N_GAUSS)``: the Gauss abscissae of every slab, where :func:`slab_points` weighs."""
+    u, _ = gauss01(N_GAUSS)
+    s = pieces.slabs
+    return s.xl[:, None] + u[None, :] * (s.xr - s.xl)[:, None]
+
+
 def slab_points(pieces: Pieces, faces: FaceIntervals, slab_iv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gauss abscissae on every slab and what a column integral needs there: ``wh (m, N)``, the
     weight times the slab's height ``h(x)`` (so ``int_S f(x) dx dy = sum wh f``), and ``phi (m, N,
     2)``, the end hats of the slab's face interval (``g(x) = phi @ g_ends``)."""
     s = pieces.slabs
-    u, w = gauss01(N_GAUSS)
-    x = s.xl[:, None] + u[None, :] * (s.xr - s.xl)[:, None]
+    _, w = gauss01(N_GAUSS)
+    x = slab_abscissae(pieces)
     idx = np.repeat(np.arange(len(s)), N_GAUSS)
     h = (slab_bound(s, pieces.faces, x.ravel(), idx, "hi") - slab_bound(s, pieces.faces, x.ravel(), idx, "lo"))
     wh = (w[None, :] * (s.xr - s.xl)[:, None]) * h.reshape(x.shape)
@@ -128,11 +135,12 @@ def check_column_data(scene, faces: FaceIntervals) -> None:
 def column_gap(space, g: np.ndarray, ce: np.ndarray) -> np.ndarray:
     """``1/2 int_S (sigma - c):A(sigma - c)`` on every slab ``S`` ``(n_slabs,)``, ``sigma = g(x) e_y (x) e_y``
     the column field (``g`` ``(n_col, 2)``: :meth:`~cvxdual.eq.space.EquilibriumSpace.column_values`)
-    and ``c`` ``(n_slabs, 3)`` a constant Voigt stress per slab (``C e(v)`` of the slab's strain)."""
+    and ``c`` ``(n_slabs, 3)`` a constant Voigt stress per slab (``C e(v)`` of the slab's strain), or
+    ``(n_slabs, N_GAUSS, 3)`` its values at the slab's Gauss abscissae (:func:`slab_abscissae`)."""
     pieces, slab_col = space.pieces, space.slab_column
     wh, phi = slab_points(pieces, space.faces, space.columns[slab_col])
     gx = np.einsum("sqa,sa->sq", phi, g[slab_col])
-    d = np.broadcast_to(-ce[:, None, :], gx.shape + (3,)).copy()
+    d = np.broadcast_to(-(ce[:, None, :] if ce.ndim == 2 else ce), gx.shape + (3,)).copy()
     d[..., 1] += gx
     A = compliances(space.scene)[pieces.slabs.body]
     return 0.5 * np.einsum("sq,sqi,sij,sqj->s", wh, d, A, d)

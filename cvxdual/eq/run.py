@@ -20,7 +20,8 @@ from ..progress import phase
 from ..records import Bounds, CertifiedErrors, ExactErrors
 from ..reference.exact import exact_reference
 from ..solution import Solution, SolverStats, skipped_error
-from ..system.kinematic import P1, KinematicSide
+from ..system.kinematic import P2, KinematicSide
+from ..system.p2_displacement import P2Displacement
 from ..system.stress_space import Solved, StressSpace
 from .bounds import (
     certified_bounds,
@@ -31,6 +32,7 @@ from .bounds import (
 )
 from .contact import edge_contact
 from .fields import EquilibriumField
+from .kinematic_p2 import p2_slack
 from .space import EquilibriumSpace
 
 
@@ -60,13 +62,14 @@ class EquilibriumStresses(StressSpace):
     certifies = True
 
     def __init__(self, kinematic: KinematicSide | None = None):
-        self.kinematic = kinematic or P1()  # the displacement of the bounds' upper side
+        self.kinematic = kinematic or P2()  # the displacement of the bounds' upper side
 
     def build(self, system, triangulation: str) -> EquilibriumSpace:
         return EquilibriumSpace.from_pieces(system.mesh, system.pieces, triangulation)
 
     def describe(self, system, space) -> str:
-        return (f"{system.n_dofs} dofs of the P1 displacement; equilibrium space: {space.n_y} stress unknowns on "
+        return (f"{system.n_dofs} dofs of the P1 displacement ({self.kinematic.name.upper()} for the bounds); "
+                f"equilibrium space: {space.n_y} stress unknowns on "
                 f"{3 * space.n_tri} sub-triangles" + (f" and {len(space.columns)} columns" if len(space.columns)
                                                       else ""))
 
@@ -87,7 +90,8 @@ class EquilibriumStresses(StressSpace):
     def solve(self, scene, triangulation, level, system, space, solver, warm_start, deadline, verbose,
               solver_options) -> Solved:
         name = "fast path" if solver == FAST else solver
-        with phase("solve", deadline, start=f"the P1 displacement, then the equilibrium stresses ({name})") as p:
+        with phase("solve", deadline, start=f"the {self.kinematic.name.upper()} displacement, then the equilibrium "
+                   f"stresses ({name})") as p:
             kin = self.kinematic.solve(scene, triangulation, level, system, solver, warm_start, deadline)
             if solver != FAST:
                 solver_options = {"time_limit": deadline.remaining() if solver in TIME_LIMIT_OPTION else None,
@@ -97,7 +101,7 @@ class EquilibriumStresses(StressSpace):
             except SolverError as e:
                 raise sliver_error(space) or e from None
             p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
-        return Solved(sigma, kin.u, stats, g)
+        return Solved(sigma, kin.u if kin.v is None else kin.v, stats, g)
 
     def recover(self, scene, triangulation, level, system, space, solved):
         return eq_solution(scene, triangulation, level, system, space, solved.stress, solved.column, solved.u,
@@ -112,8 +116,9 @@ class EquilibriumStresses(StressSpace):
         whatever solved ``sol``: the same QP, exact), the time added to its recovery."""
         t0 = time.perf_counter()
         space = self.build(sol.system, sol.triangulation)
-        sigma, g, _ = eq_stresses(space, FAST, (sol.mesh.pair_x, sol.contact["active"]))
-        bounds = certified_bounds(space, sigma, sol.displacement, g=g)
+        pairs = (sol.mesh.pair_x, sol.contact["active"])
+        sigma, g, _ = eq_stresses(space, FAST, pairs)
+        bounds = certified_bounds(space, sigma, self.kinematic.certificate(sol.system, sol.displacement, pairs), g=g)
         dt = time.perf_counter() - t0
         timings = {**sol.timings, "recover": sol.timings["recover"] + dt, "total": sol.timings["total"] + dt}
         return replace(sol, bounds=bounds, space=space, timings=timings)
@@ -141,6 +146,11 @@ def sliver_error(space: EquilibriumSpace) -> SolverError | None:
     return SolverError(f"{why}, or use stress_space='p0'", cli=f"{why}, or drop --stress-space eq", reason=why)
 
 
+def nodal_values(v) -> np.ndarray:
+    """``(n_nodes, 2)``: a certificate's displacement at the mesh's nodes (P1: itself)."""
+    return v.vertices if isinstance(v, P2Displacement) else v
+
+
 def error_summary(e: ExactErrors, bounds: Bounds) -> CertifiedErrors:
     """A solution's ``error`` entry from :func:`~cvxdual.eq.bounds.exact_errors` and its bounds."""
     return CertifiedErrors(l2=e["l2"], l2_rel=e["l2_rel"], energy=e["stress_A"],
@@ -154,12 +164,13 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u,
     """The eq run's :class:`Solution` (timings empty): bounds, residuals and errors of ``sigma``,
     ``g`` and ``u``; and the seconds the error against an exact field took."""
     blocks = edge_constraints(space)
-    b = certified_bounds(space, sigma, u.reshape(-1, 2), blocks=blocks, g=g)
+    b = certified_bounds(space, sigma, u.reshape(-1, 2) if isinstance(u, np.ndarray) else u, blocks=blocks, g=g)
     v = b["displacement"]
+    nodal = nodal_values(v)
     res = dict(b["residuals"])
     sc = space.scales
-    delta = max(float(np.abs(v).max()), float(np.abs(system.eps).max()), sc.displacement)
-    _, smin, _ = contact_slack(space, v)
+    delta = max(float(np.abs(nodal).max()), float(np.abs(system.eps).max()), sc.displacement)
+    smin = p2_slack(space, v)[1] if isinstance(v, P2Displacement) else contact_slack(space, v)[1]
     res = {"admissibility": max(res.values()), **res,
            "penetration": float(max(0.0, -smin.min(initial=0.0)) / delta)}
     exact, why = exact_reference(scene)
@@ -169,9 +180,9 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u,
         error = error_summary(exact_errors(space, sigma, v, exact, g=g), b)
     t_err = time.perf_counter() - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
-    contact = edge_contact(system, -contact_tractions(space, sigma, blocks, g), v)
+    contact = edge_contact(system, -contact_tractions(space, sigma, blocks, g), nodal)
     return Solution(scene=scene, triangulation=triangulation, level=int(level), system=system,
-                    field=EquilibriumField.of_space(space, sigma, g), displacement=v, solver=stats,
+                    field=EquilibriumField.of_space(space, sigma, g), displacement=nodal, solver=stats,
                     timings={},
                     objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res, contact=contact,
                     exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space,

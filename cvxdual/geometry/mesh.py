@@ -28,7 +28,7 @@ from ..records import MeshSize
 from ..scene.scene import Body, Scene
 from ..validate import short
 from .mesh_check import check_body_mesh
-from .outline import RestMesh, held_parts, mesh_rest, strip_depth
+from .outline import ContinuationRule, RestMesh, continuation_rule, held_parts, mesh_rest, strip_depth
 from .triangles import edge_lengths
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
@@ -288,6 +288,22 @@ class Mesh:
         if not out:
             return np.zeros((0, 3), int), np.zeros(0), np.zeros(0, int)
         return tuple(np.concatenate(v) for v in zip(*out, strict=True))
+
+    def continuation_rule(self, n: int = 12) -> ContinuationRule:
+        """A quadrature on the exact pieces of :meth:`continuation` (the same rows), exact for
+        polynomials of degree 2 in ``x, y``: a P2 displacement's strain is not constant there, so
+        the areas do not give its energy (:func:`~cvxdual.geometry.outline.continuation_rule`,
+        ``n`` angles a half piece). A corner's third node (where the tangents meet) lies beyond its
+        chord, away from the centre; a segment's triangle is in the body, on the centre's side."""
+        out = [(bm.offset + bm.rest.virtual_nodes, bm.offset + bm.rest.virtual_ends, bm.rest.virtual_arc)
+               for bm in self.bodies if bm.rest is not None]
+        nodes, ends, arc = ((np.concatenate(v) for v in zip(*out, strict=True)) if out
+                            else (np.zeros((0, 3), int), np.zeros((0, 2), int), np.zeros((0, 3))))
+        a, b = self.points[ends[:, 0]], self.points[ends[:, 1]]
+        third = self.points[nodes[(nodes != ends[:, :1]) & (nodes != ends[:, 1:])]]  # one a row
+        mid = 0.5 * (a + b)
+        corner = np.einsum("ij,ij->i", third - mid, mid - arc[:, :2]) > 0
+        return continuation_rule(a, b, arc, corner, n)
 
     def polygonal_parts(self) -> list[str]:
         """``body.part`` names of the curved outline parts meshed as polygons (supported or loaded

@@ -39,7 +39,13 @@ Point data:
 
 * ``displacement`` (3 components, z = 0). Curved-piece outline points take the nearest mesh
   node of their body; the line points the lower face nodes' displacement linearly interpolated
-  along the face (the P1 field on the face edge).
+  along the face (the P1 field on the face edge). ``eq`` with the P2 kinematic side: on the
+  sub-triangle cells, the P2 displacement of the bounds at the cell's vertices, and its values
+  at the midpoints of the cell's edges ``(X_i, X_i+1)``, ``(X_i+1, c)``, ``(c, X_i)`` as the cell
+  array ``displacement_midpoints`` (6 components: x, y at each; NaN on the other cells): the
+  quadratic on every cell, so ``J(v)``, the strains and the contact jumps of the certificate are
+  reproducible from the file (a slab's displacement is the trace of its face edge's cell
+  continued along y; the line points interpolate the vertex values linearly).
 * ``eq`` only: ``s11``, ``s22``, ``s12``, ``stress`` (the components, exactly linear on each
   cell), ``von_mises``, ``principal_1``, ``principal_2`` (of the vertex values; a viewer
   interpolates them linearly, they are not linear themselves). On the line points: the lower
@@ -208,9 +214,13 @@ def _write_eq_vtu(sol, path) -> None:
     c = _eq_cells(sol.space, sol.stress)
     tri = sol.space.tri
     v = sol.displacement
-    # the P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid), in cell order
-    corner = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(v[tri].mean(axis=1)[:, None],
-                                                                            (len(tri), 3, 2))], axis=2)
+    p2 = sol.bounds is not None and sol.bounds["kinematic"] == "p2"
+    if p2:  # the P2 displacement at the sub-triangle vertices, its midpoint values as cell data
+        sv = sol.bounds["displacement"].sub_values()  # (n_T, 3, 6, 2)
+        corner = sv[:, :, :3]
+    else:  # the P1 displacement at the sub-triangle vertices (X_i, X_i+1, centroid), in cell order
+        corner = np.stack([v[tri], np.roll(v[tri], -1, axis=1), np.broadcast_to(v[tri].mean(axis=1)[:, None],
+                                                                                (len(tri), 3, 2))], axis=2)
     lines = contact_lines(sol)
     cb = c["cell_body"]
     face = sol.scene.bodies[lines["body"]].face
@@ -225,6 +235,8 @@ def _write_eq_vtu(sol, path) -> None:
     cell = {"piece_kind": [np.zeros(len(cb), np.int32)], "body": [cb.astype(np.int32)]}
     if sol.bounds is not None:
         cell["bound_contribution"] = [sol.bounds["contributions"]["sub"].ravel()]
+    if p2:
+        cell["displacement_midpoints"] = [np.ascontiguousarray(sv[:, :, 3:].reshape(-1, 6))]
     if len(sol.space.pieces.slabs):
         col = _column_cells(sol)
         k = col["cells"].shape[1]
@@ -234,6 +246,8 @@ def _write_eq_vtu(sol, path) -> None:
         cell["piece_kind"].append(col["cell_kind"]), cell["body"].append(col["cell_body"])
         if sol.bounds is not None:
             cell["bound_contribution"].append(sol.bounds["contributions"]["column"])
+        if p2:  # a slab's displacement is its face edge's trace, continued along y
+            cell["displacement_midpoints"].append(np.full((len(col["cells"]), 6), np.nan))
     s = np.concatenate([*s, s_line])
     pbody = np.concatenate([*pbody, np.full(len(s_line), lines["body"])])
     # point data on the cells' points and then the line points (the order _write puts them in)

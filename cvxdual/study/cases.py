@@ -389,8 +389,8 @@ def _certificate(sol) -> dict:
     b = sol.bounds
     if b is None:
         return {}
-    norm = np.sqrt(2.0 * b["complementary_energy"]) if b["complementary_energy"] > 0 else np.nan
-    return {"bound_energy_rel": float(b["error_bound"] / norm), "guaranteed": bool(b["guaranteed"])}
+    rel = b["error_bound_rel"]
+    return {"bound_energy_rel": np.nan if rel is None else float(rel), "guaranteed": bool(b["guaranteed"])}
 
 
 def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict:

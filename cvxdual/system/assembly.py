@@ -138,6 +138,20 @@ class System:
         """:meth:`local_stiffness` in the nodes' frames: on the components ``rdof`` indexes."""
         return to_frames(self.supports, self.pieces.nodes, self.local_stiffness())
 
+    @property
+    def local_rdofs(self) -> np.ndarray:
+        """``(n_pieces, 6)``: the r index of each piece's local dofs (-1 if fixed)."""
+        return self.rdof[self.pieces.dofs]
+
+    @property
+    def load_r(self) -> np.ndarray:
+        """The loads in r: ``Z^T f``."""
+        return self.Z.T @ self.f
+
+    def apply_stiffness(self, r: np.ndarray) -> np.ndarray:
+        """``K r = Z^T E A_h^-1 E^T Z r`` without forming ``K``."""
+        return self.Z.T @ (self.E @ self.stresses_from_displacement(self.Z @ r).ravel())
+
     def stiffness(self) -> sp.csr_matrix:
         """``K = E A_h^-1 E^T = sum_P |P| B_P^T C_P B_P`` on all dofs."""
         d = self.pieces.dofs

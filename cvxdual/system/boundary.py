@@ -8,6 +8,7 @@ the same stretch of boundary.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,18 +79,28 @@ class Supports:
         return float(np.abs(self.rows(np.asarray(v, float)[:, :, None])).max(initial=0.0))
 
 
-def supports(mesh: Mesh) -> Supports:
+def supports(mesh: Mesh, midpoints: tuple[Callable, int] | None = None) -> Supports:
     """The :class:`Supports` of the mesh's boundary parts. A node under two supports takes both:
-    a sliding node on a second, non-parallel line (a corner) is held like a clamped one."""
-    n = mesh.n_nodes
+    a sliding node on a second, non-parallel line (a corner) is held like a clamped one.
+
+    ``midpoints`` ``(edge_node, n)`` extends them to the ``n`` nodes of a P2 displacement:
+    ``edge_node(a, b)`` is the node at the midpoint of edge ``(a, b)`` (-1 if none), and the
+    midpoint of two consecutive side nodes of a part is held as the part holds them (a quadratic
+    on a straight part vanishes there, in the held component, when it does at its three nodes)."""
+    n = mesh.n_nodes if midpoints is None else midpoints[1]
     fixed = np.zeros((n, 2), bool)
     normal = np.zeros((n, 2))  # a sliding support's unit normal where it is not an axis
     for bm in mesh.bodies:
         for part in bm.body.boundary:
             if part.kind == "traction":
                 continue
-            nodes = bm.side_nodes(part.on)
-            nodes = nodes[in_part(part, mesh.points, nodes)]
+            side = bm.side_nodes(part.on)
+            inside = in_part(part, mesh.points, side)
+            nodes = side[inside]
+            if midpoints is not None:
+                both = inside[:-1] & inside[1:]
+                mid = midpoints[0](side[:-1][both], side[1:][both])
+                nodes = np.concatenate([nodes, mid[mid >= 0]])
             nv = None if part.kind == "clamped" else sliding_normal(bm.body, part)
             if nv is None:
                 fixed[nodes] = True
@@ -251,20 +262,28 @@ def load_vector(mesh: Mesh, pieces: Pieces, n_gauss: int = 8) -> np.ndarray:
     bf = np.array([b.body_force for b in scene.bodies])[pieces.body]  # (n_p, 2)
     f = sum(np.bincount((2 * pieces.nodes + c).ravel(), (pieces.phi * bf[:, c, None]).ravel(), n)
             for c in (0, 1))
+    for a, b, u, P in traction_stretches(mesh, n_gauss):
+        for c in (0, 1):
+            f += np.bincount(2 * a + c, np.sum((1 - u)[None, :] * P[..., c], axis=1), n)
+            f += np.bincount(2 * b + c, np.sum(u[None, :] * P[..., c], axis=1), n)
+    if not np.all(np.isfinite(f)):
+        raise SceneError("the load vector is not finite; check the loads and the exact field")
+    return f
+
+
+def traction_stretches(mesh: Mesh, n_gauss: int = 8):
+    """For every traction part of every body: its stretches' end nodes ``a``, ``b`` ``(m,)``, the
+    Gauss abscissae ``u`` ``(g,)`` on each stretch (0 at ``a``, 1 at ``b``; on the face, in x) and the
+    traction times the length weight ``P`` ``(m, g, 2)`` there (:func:`side_quadrature`): what a
+    load vector integrates against its shape functions."""
     exact = None
     for k, bm in enumerate(mesh.bodies):
         for part in bm.body.boundary:
             if part.kind != "traction":
                 continue
             if part.traction.kind != "uniform" and exact is None:
-                exact = exact_field(scene)
+                exact = exact_field(mesh.scene)
                 if exact is None:
                     raise SceneError(f"body {bm.body.name!r}: traction 'exact' needs an [exact] field in the scene")
             a, b, x, u, nds = side_quadrature(mesh, k, part, n_gauss)
-            P = _traction_density(part, k, x, nds, exact)
-            for c in (0, 1):
-                f += np.bincount(2 * a + c, np.sum((1 - u)[None, :] * P[..., c], axis=1), n)
-                f += np.bincount(2 * b + c, np.sum(u[None, :] * P[..., c], axis=1), n)
-    if not np.all(np.isfinite(f)):
-        raise SceneError("the load vector is not finite; check the loads and the exact field")
-    return f
+            yield a, b, u, _traction_density(part, k, x, nds, exact)

@@ -82,7 +82,10 @@ class _Base:
 
 class DisplacementSolver:
     """The linear algebra of the active-set method (:mod:`cvxdual.activeset.core`) on the displacement
-    form of one assembled :class:`~cvxdual.system.assembly.System`."""
+    form of one assembled :class:`~cvxdual.system.assembly.System` (P1), or of any system with the
+    same contact data (``n_r``, ``ja``, ``jb``, ``eps``, ``anchors``, ``separating``, ``scales``) and
+    stiffness (``frame_stiffness()``, ``local_rdofs``, ``load_r``, ``apply_stiffness``, ``Z``): the P2
+    kinematic side's :class:`~cvxdual.system.p2_system.P2System`."""
 
     what = "fast path"
     advice = ("use the CVXPY path (solver='CLARABEL')", "use the CVXPY path (--solver CLARABEL)")
@@ -90,8 +93,8 @@ class DisplacementSolver:
     def __init__(self, system: System):
         self.system = s = system
         self.kloc = s.frame_stiffness()  # on the components r indexes; reused by every factorisation
-        self.rd = s.rdof[s.pieces.dofs]
-        self.g = s.Z.T @ s.f
+        self.rd = s.local_rdofs
+        self.g = s.load_r
         self.anchored = np.zeros(s.n_r, bool)
         self.anchored[s.anchors] = True
         self.jumps = s.separating[s.jb] - s.separating[s.ja]  # each pair's relative motion, per separating mode
@@ -100,8 +103,7 @@ class DisplacementSolver:
         self.stats = ActiveSetStats()
 
     def apply_k(self, r: np.ndarray) -> np.ndarray:
-        s = self.system
-        return s.Z.T @ (s.E @ s.stresses_from_displacement(s.Z @ r).ravel())
+        return self.system.apply_stiffness(r)
 
     def k_columns(self, j: np.ndarray) -> sp.csc_matrix:
         """``K e_j`` for r indices ``j``: ``(n_r, len(j))``, from the pieces around them."""

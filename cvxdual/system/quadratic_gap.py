@@ -142,3 +142,26 @@ def restore_admissible(x, e, M, q_nodes, q_mid, margin: float | None = None) -> 
         qn -= a
         qm -= t
     raise ValueError(f"the jump is still inadmissible after {RESTORE_PASSES} passes")
+
+
+
+# rounding of the closed forms of the curvature bounds: they are widened by this fraction
+CURVATURE_MARGIN = 1e-9
+
+
+def gap_curvature(scene, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
+    """A guaranteed upper bound ``M`` of the gap's second derivative on each interval ``[x0, x1]``:
+    ``eps = f_u - f_l + g`` (upper face, lower face, gap profile), so ``eps'' <= max f_u'' - min f_l''
+    + max g''`` (each profile's ``curvature_range``, from its closed form), widened by
+    :data:`CURVATURE_MARGIN` of the terms for their rounding."""
+    (_, hu), (ll, _), (_, hg) = (p.curvature_range(x0, x1) for p in (scene.upper.face, scene.lower.face,
+                                                                       scene.gap_profile))
+    return hu - ll + hg + CURVATURE_MARGIN * (np.abs(hu) + np.abs(ll) + np.abs(hg))
+
+
+def bernstein_gap(x: np.ndarray, e: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``(n,)``: the bound ``(e0 + e1 + kappa) / 2`` (``kappa = -M d^2 / 2``) on the middle Bernstein
+    coefficient ``2 q(1/2) - (q0 + q1) / 2`` of a quadratic jump on each interval of a chain (nodes
+    ``x``, gap ``e`` there, curvature bounds ``M``) that, with ``q <= e`` at the nodes, makes the jump
+    admissible at every x (:func:`bernstein_slack`): a linear constraint per interval."""
+    return 0.5 * (e[:-1] + e[1:] - 0.5 * M * np.diff(x) ** 2)

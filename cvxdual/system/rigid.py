@@ -100,7 +100,7 @@ def rigid_modes(mesh, pieces, sup, rdof: np.ndarray, ja: np.ndarray, jb: np.ndar
     floating, separating = modes @ vt2[rank:].T, modes @ vt2[:rank].T
     anchors, imbalance, correction = np.empty(0, int), 0.0, 0.0
     if floating.shape[1]:
-        f, imbalance, correction = _balance(Z @ floating, f, cand)
+        f, imbalance, correction = balance(Z @ floating, f, cand)
         keep = np.ones(n_r, bool)
         keep[jb] = False  # anchors off the pairs' lower dofs (those the fast path eliminates)
         J0 = np.flatnonzero(keep)
@@ -139,7 +139,7 @@ def check_balance(work: np.ndarray, scale: np.ndarray, total: np.ndarray) -> flo
     return rel
 
 
-def _balance(Q: np.ndarray, f: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, float, float]:
+def balance(Q: np.ndarray, f: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Remove the loads' small work on the floating motions ``Q`` ``(n_dofs, m)`` (combinations of
     the candidates ``cand`` with orthonormal coefficients): ``(f, load_imbalance, load_correction)``."""
     work = Q.T @ f

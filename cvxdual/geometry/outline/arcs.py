@@ -34,11 +34,15 @@ def match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarray, allp: np.ndarray):
     """Node triples and area weights of the free arcs' continuation pieces (``OutlineBuild.free_arc``):
-    their points found among gmsh's nodes ``xy`` (local indices ``idx``) by their coordinates."""
+    their points found among gmsh's nodes ``xy`` (local indices ``idx``) by their coordinates. Then,
+    for a quadrature on the exact pieces, each piece's arc ``(cx, cy, r)`` and the nodes at its
+    ends on the arc: a segment's triangle may have all three nodes on the circle (two chords of one
+    triangle, seen on punch-on-block), so the triple alone does not say which edge is the chord."""
     corner = np.asarray(virtual["corner"], float).reshape(-1, 3, 2)
     chord = np.asarray(virtual["segment"], float).reshape(-1, 2, 2)
+    arc = np.asarray(virtual["corner_arc"] + virtual["segment_arc"], float).reshape(-1, 3)
     if not len(corner) + len(chord):
-        return np.zeros((0, 3), int), np.zeros(0)
+        return np.zeros((0, 3), int), np.zeros(0), arc, np.zeros((0, 2), int)
     c_nodes = idx[match_rows(corner.reshape(-1, 2), xy)].reshape(-1, 3)
     c_area = 0.5 * np.abs(doubled_areas(allp, c_nodes))
     # the triangle on each chord: its edge key among the edges of the triangles at the chords' ends
@@ -49,7 +53,8 @@ def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarra
     order = np.argsort(keys)
     t = near[order[np.searchsorted(keys[order], edge_keys(ends[:, 0], ends[:, 1], n))] // 3]
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
-            np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]))
+            np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]),
+            arc, np.concatenate([c_nodes[:, [0, 2]], ends]).astype(int))
 
 
 def first_clash(rings: list, owners: list) -> tuple | None:

@@ -51,7 +51,8 @@ class OutlineBuild:
         self.fixed: list[int] = []  # two-node lines: the strip's edges, the free arcs' polygons, splines
         self.shape: dict[int, tuple] = {}  # every curve's polyline (a line's two ends) and whether a cut may split it
         self.mids: dict[int, tuple] = {}  # a two-node line's node added on refinement (the fine polygon's); None: whole
-        self.virtual = {"corner": [], "segment": [], "segment_area": []}  # the free arcs' pieces (free_arc)
+        # the free arcs' pieces (free_arc), each with its arc (cx, cy, r): the exact region for a quadrature
+        self.virtual = {"corner": [], "segment": [], "segment_area": [], "corner_arc": [], "segment_arc": []}
         self.arc_of: dict[int, tuple] = {}  # gmsh's arcs (loaded or supported): centre and radius
         self.chain_pts: list[int] = []  # the points of the chain gmsh gets, left to right
         self.loop: list[int] = []  # signed curve tags of the outer loop, from the right end of the chain
@@ -110,7 +111,8 @@ class OutlineBuild:
         the body beyond it (segments, or the tangent polygon's corners) carry zero stress; the
         displacement continues there as a P1 function, recorded in ``self.virtual`` for the energy
         bound: the adjacent triangle's polynomial on a segment (``"segment"``: the chord's ends, and
-        ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``). The polygon
+        ``"segment_area"``), or the interpolant on the triangle of a corner (``"corner"``); each with its
+        arc's centre and radius (``"segment_arc"``, ``"corner_arc"``), which bound the piece. The polygon
         is the one of ``self.level``; meshed at the level below (``self.step`` 2), gmsh gets every
         other vertex of it and refinement places the rest."""
         step, virtual = self.step, self.virtual
@@ -130,10 +132,12 @@ class OutlineBuild:
             for j in range(n):
                 virtual["segment"].append((on[j], on[j + 1]))
                 virtual["segment_area"].append(seg_area)
+                virtual["segment_arc"].append((c[0], c[1], r))
             return self.polyline(np.array(on), lc)
         rv = r / math.cos(0.5 * d)
         corners = [tuple(c + rv * np.array([math.cos(q + 0.5 * d), math.sin(q + 0.5 * d)])) for q in t[:-1]]
         virtual["corner"] += [(on[j], corners[j], on[j + 1]) for j in range(n)]
+        virtual["corner_arc"] += [(c[0], c[1], r)] * n
         ids = [self.point(q, lc) for q in on]
         if step > 1:  # gmsh meshes the chords; refinement puts the corners on them
             return [self.line(ids[j], ids[j + 1], keep=True, mid=corners[j]) for j in range(n)]

@@ -74,7 +74,8 @@ def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
                        np.frombuffer(inner_y), level, what=f"meshing body {body.name!r} at level {level}")
     finally:
         _SPENT[0] += time.perf_counter() - t
-    for a in (rest.points, rest.triangles, rest.virtual_nodes, rest.virtual_weight, *rest.parts.values()):
+    for a in (rest.points, rest.triangles, rest.virtual_nodes, rest.virtual_weight, rest.virtual_arc,
+              rest.virtual_ends, *rest.parts.values()):
         a.flags.writeable = False
     return rest
 

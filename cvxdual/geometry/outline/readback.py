@@ -33,6 +33,8 @@ class RestMesh:
     parts: dict
     virtual_nodes: np.ndarray  # (m, 3): the P1 function continued beyond a free arc (build.OutlineBuild.free_arc)
     virtual_weight: np.ndarray  # (m,): the area it covers
+    virtual_arc: np.ndarray  # (m, 3): the arc (cx, cy, r) that bounds it (a quadrature on the exact piece)
+    virtual_ends: np.ndarray  # (m, 2): its nodes at the ends of that arc
 
 
 def read_back(build: OutlineBuild) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -94,8 +96,9 @@ def renumbered(build: OutlineBuild, xy, tris, curve_nodes) -> RestMesh:
     cw = doubled_areas(allp, tris) < 0
     tris[cw] = tris[cw][:, ::-1]  # counter-clockwise, as every triangle of the package
     parts = _part_chains(build.part_curves, nc, idx, curve_nodes)
-    vn, vw = continuation(build.virtual, xy, idx, tris, allp)
-    return RestMesh(points=xy[new], triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw)
+    vn, vw, va, ve = continuation(build.virtual, xy, idx, tris, allp)
+    return RestMesh(points=xy[new], triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw,
+                    virtual_arc=va, virtual_ends=ve)
 
 
 def _part_chains(part_curves: dict, nc: int, idx: np.ndarray, curve_nodes: dict) -> dict:
