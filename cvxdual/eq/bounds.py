@@ -514,7 +514,7 @@ def exact_errors(space: EquilibriumSpace, sigma: np.ndarray, displacement: np.nd
         sbody = space.pieces.slabs.body[si]
         field = np.stack([np.zeros(len(gx)), gx, np.zeros(len(gx))], 1)
         es = (slab_strains(space, displacement)[si] if isinstance(displacement, np.ndarray)
-              else displacement.slab_strains(si, sp_[:, 0]))
+              else displacement.slab_strains(si, sp_))
         kin = np.einsum("sij,sj->si", stiff[sbody], es)
         _accumulate_errors(space, exact, sbody, sp_[:, None], field[:, None], kin[:, None], sw[:, None], acc)
     dd, rr, dAd, rAr, eAe, ee = acc

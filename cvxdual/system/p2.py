@@ -95,7 +95,30 @@ def _shape_gradients(bary: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.concatenate([vert, np.stack(edges, 2)], axis=2)
 
 
-def _strain_matrix(dphi: np.ndarray) -> np.ndarray:
+def shapes_at(P: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The P2 functions ``(m, q, 6)`` and their gradients ``(m, q, 6, 2)`` of triangles ``P (m, 3, 2)``
+    (vertices, then the midpoints of ``(0, 1), (1, 2), (2, 0)``) at points ``pts (m, q, 2)``, inside the
+    triangle or not (a polynomial continued)."""
+    G, _ = bary_gradients(P)  # (m, 3, 2)
+    lam = np.eye(3)[0] + np.einsum("mad,mqd->mqa", G, pts - P[:, None, 0])
+    values = np.concatenate([lam * (2 * lam - 1), np.stack([4 * lam[..., a] * lam[..., b] for a, b in P2_EDGES],
+                                                           -1)], -1)
+    vert = np.einsum("mqa,mad->mqad", 4 * lam - 1, G)
+    edge = [4 * (lam[..., a, None] * G[:, None, b] + lam[..., b, None] * G[:, None, a]) for a, b in P2_EDGES]
+    return values, np.concatenate([vert, np.stack(edge, 2)], 2)
+
+
+def hessians(P: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``(m, 2, 2, 2)``: the (constant) second derivatives ``[i, j, k] = d^2 u_i / dx_j dx_k`` of the
+    quadratics with ``values (m, 6, 2)`` at the P2 nodes of triangles ``P (m, 3, 2)``."""
+    G, _ = bary_gradients(P)
+    H = [4 * np.einsum("mj,mk->mjk", G[:, a], G[:, a]) for a in range(3)]
+    H += [4 * (np.einsum("mj,mk->mjk", G[:, a], G[:, b]) + np.einsum("mj,mk->mjk", G[:, b], G[:, a]))
+          for a, b in P2_EDGES]
+    return np.einsum("mni,nmjk->mijk", values, np.stack(H))
+
+
+def strain_matrix(dphi: np.ndarray) -> np.ndarray:
     """``(..., 3, 12)``: engineering strain ``(e11, e22, 2 e12)`` of the dofs ``2 k + j`` from the
     shape gradients ``dphi (..., 6, 2)``."""
     B = np.zeros(dphi.shape[:-2] + (3, 6, 2))
@@ -120,7 +143,7 @@ def alfeld_stiffness(X: np.ndarray, C: np.ndarray) -> np.ndarray:
     K = np.zeros((len(X), 20, 20))
     for i in range(3):
         G, area = bary_gradients(P[:, i])
-        B = _strain_matrix(_shape_gradients(bary, G))  # (m, q, 3, 12)
+        B = strain_matrix(_shape_gradients(bary, G))  # (m, q, 3, 12)
         d = SUB_DOFS[i]
         K[:, d[:, None], d] += np.einsum("q,tqak,tab,tqbl->tkl", w, B, C, B) * area[:, None, None]
     return K
@@ -230,7 +253,7 @@ def evaluate_p2(X: np.ndarray, ue: np.ndarray, sub: int, bary: np.ndarray) -> tu
     u = np.asarray(ue, float)[:, SUB_DOFS[sub]]  # (m, 12)
     x = np.einsum("qa,tad->tqd", bary, P)
     vals = np.einsum("qa,taj->tqj", _shape_values(bary), u.reshape(-1, 6, 2))
-    strain = np.einsum("tqak,tk->tqa", _strain_matrix(_shape_gradients(bary, G)), u)
+    strain = np.einsum("tqak,tk->tqa", strain_matrix(_shape_gradients(bary, G)), u)
     return x, vals, strain
 
 
