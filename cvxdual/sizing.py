@@ -32,7 +32,9 @@ BASE_BYTES = 200e6  # the interpreter with NumPy, SciPy, CVXPY and a solver load
 # rounded up. "cvxpy": the P0 dual through CVXPY and Clarabel; "fast": the P0 fast path; on top
 # of the P0 fast solve, the equilibrium space by its fast route ("eq") or through CVXPY ("eq_cvxpy"), and the
 # P2 kinematic side of a certificate ("p2").
-BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3, "p2": 12e3}
+# "p2": measured 0.7 kB a triangle more at the peak (hertz level 5, eq route: 2367 against 2261 MB); its
+# own arrays (element blocks, about 5 kB a triangle) are freed before the equilibrium stresses' peak
+BYTES_PER_TRIANGLE = {"cvxpy": 12e3, "fast": 5e3, "eq": 12e3, "eq_cvxpy": 100e3, "p2": 2e3}
 ENV = "CVXDUAL_MAX_MEMORY"
 PLAUSIBLE_MEMORY = 1e14  # bytes: more than any one machine has (100 TB)
 _UNITS = {"": 1, "B": 1, "KB": 1e3, "MB": 1e6, "GB": 1e9, "TB": 1e12, "KIB": 2**10, "MIB": 2**20, "GIB": 2**30,

@@ -44,8 +44,11 @@ Point data:
   at the midpoints of the cell's edges ``(X_i, X_i+1)``, ``(X_i+1, c)``, ``(c, X_i)`` as the cell
   array ``displacement_midpoints`` (6 components: x, y at each; NaN on the other cells): the
   quadratic on every cell, so ``J(v)``, the strains and the contact jumps of the certificate are
-  reproducible from the file (a slab's displacement is the trace of its face edge's cell
-  continued along y; the line points interpolate the vertex values linearly).
+  reproducible from the file: on a segment of a convex face the displacement is its chord's cell's
+  quadratic continued beyond the chord, on a type-2 tangent polygon's slab the trace of its edge's
+  cell continued along y; the line points interpolate the vertex values linearly. Not in the file:
+  the P2 side's elements ``A, B, C`` of type 1's concave pieces (the certificate's ``v`` there; the
+  slab polygon cells hold the stress).
 * ``eq`` only: ``s11``, ``s22``, ``s12``, ``stress`` (the components, exactly linear on each
   cell), ``von_mises``, ``principal_1``, ``principal_2`` (of the vertex values; a viewer
   interpolates them linearly, they are not linear themselves). On the line points: the lower
