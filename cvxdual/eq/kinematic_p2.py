@@ -26,8 +26,10 @@ from ..geometry.triangles import bary_gradients, sub_vertices
 from ..records import DisplacementFix
 from ..system.boundary import supports
 from ..system.p2 import barycentric_rule, hessians, shapes_at
+from ..system.p2_contact import middle_slabs
 from ..system.p2_displacement import P2Displacement
-from ..system.p2_system import element_slab_rule, middle_slabs, trace_shapes
+from ..system.p2_layout import trace_shapes
+from ..system.p2_system import element_slab_rule
 from ..system.quadratic_gap import quadratic_slack_bound, restore_admissible
 from ..voigt import compliances, stiffnesses
 from .bounds import (

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..geometry.triangles import bary_gradients, sub_vertices
 from .p2 import SUB_DOFS, evaluate_p2, shapes_at
-from .p2_system import P2Layout, trace_shapes
+from .p2_layout import P2Layout, trace_shapes
 
 VERTICES = np.eye(3)  # barycentric points of a sub-triangle's vertices
 

@@ -1,23 +1,16 @@
-"""The P2 kinematic side on a scene's mesh (docs/equilibrium.md section 12): continuous P2 on the
-Alfeld split of the straight triangles (:mod:`cvxdual.system.p2`), the curved pieces' traces,
-supports, consistent loads, rigid motions and contact pairs at the face vertices and at the
-midpoints of the contact intervals, in the form the active-set fast path solves
-(:class:`~cvxdual.system.displacement.DisplacementSolver`).
+"""The P2 kinematic side's system on a scene's mesh (docs/equilibrium.md section 12): continuous P2 on
+the Alfeld split of the elements of :mod:`cvxdual.system.p2_layout`, supports and consistent loads,
+rigid motions, and the contact pairs with their middle unknowns (:mod:`cvxdual.system.p2_contact`),
+in the form the active-set fast path solves (:class:`~cvxdual.system.displacement.DisplacementSolver`).
 
-Nodes. The mesh's nodes keep their ids, then one node per edge of the straight triangles (the
-midpoint; :func:`~cvxdual.system.p2.p2_dofs`). The curved pieces carry no node of their own: ``v``
-there is the quadratic trace of its face edge continued along y (the paper's rule for P1): the
-chord of a segment, a polygon edge of a ``concave2`` piece; on a ``concave1`` piece ``A, B, C``
-(side ``BC`` vertical) the trace is the quadratic in x through ``v(A)``, ``v(mid AC)`` and ``v(B)``,
-which is ``v`` on the side ``AC``; continuity on ``BC`` then ties ``C`` *and* ``mid BC`` to ``B``.
+Curved pieces. A segment (between a chord and a convex arc) takes its straight triangle's quadratic
+continued beyond the chord, its energy added to that element's matrix; a type-1 concave piece is the
+element ``A, B, C`` less the sliver between its chord and the arc (the sliver's energy subtracted);
+a type-2 piece keeps the trace of its polygon edge continued along y (6 x 6 slab matrices). Only the
+last has ``e_yy = 0`` (the paper's P1 rule, which locks as ``nu -> 1/2``).
 
-Contact. Both faces' nodes and interval midpoints lie on common vertical lines, so the pairs are
-the P1 pairs and one pair at the midpoint of every contact interval (interleaved by x): the jump
-is quadratic on each interval and the constraint holds at its three points; pointwise
-admissibility between them is the certificate's business (:mod:`cvxdual.system.quadratic_gap`).
-
-Rigid motions are affine, so P2 interpolates them exactly: the P1 system's floating and
-separating motions, interpolated, are the P2 system's, and its loads are balanced on them.
+Rigid motions are found in the P2 space itself (:func:`p2_rigid_modes`): affine motions interpolate
+exactly, and which are free can differ from P1's (a rotating segment strains P1's trace along y).
 """
 
 from __future__ import annotations
@@ -28,9 +21,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError, SceneError
-from ..geometry.pieces import PIECE_KINDS, slab_bound
+from ..geometry.pieces import slab_bound
 from ..geometry.quadrature import gauss01
-from ..geometry.triangles import bary_gradients, doubled_areas, edge_keys, sub_vertices
+from ..geometry.triangles import bary_gradients, sub_vertices
 from ..linalg.sparse import assemble_blocks
 from ..voigt import stiffnesses
 from .assembly import Scales, System
@@ -42,144 +35,16 @@ from .p2 import (
     Condensed,
     alfeld_stiffness,
     condense,
-    p2_dofs,
     shapes_at,
     strain_matrix,
 )
+from .p2_contact import element_maps, face_middles, middle_maps
+from .p2_layout import CONCAVE1, P2Layout, interpolation, p2_layout, trace_shapes
 from .quadratic_gap import bernstein_gap, gap_curvature
 from .rigid import balance, candidates, pivot_columns
 
-CONCAVE1, SEGMENT = PIECE_KINDS.index("concave1"), PIECE_KINDS.index("segment")
 SLAB_GAUSS = 10  # points in x per slab: h(x) times a quadratic, exact for polynomial faces of degree <= 17
 CHUNK = 4096  # triangles whose 20 x 20 element matrices exist at once (about 13 MB)
-
-
-def trace_shapes(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The quadratic Lagrange functions on ``[0, 1]`` with nodes ``0, 1/2, 1`` and their derivatives
-    at ``t`` (``(..., 3)`` each, in that node order)."""
-    t = np.asarray(t, float)[..., None]
-    N = np.concatenate([(1 - t) * (1 - 2 * t), 4 * t * (1 - t), t * (2 * t - 1)], -1)
-    dN = np.concatenate([4 * t - 3, 4 - 8 * t, 4 * t - 1], -1)
-    return N, dN
-
-
-@dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==
-class P2Layout:
-    """Where the P2 nodes are: ``tri`` the elements (the straight triangles as the equilibrium space
-    orders them, then the triangles ``A, B, C`` of the ``concave1`` pieces), ``nodes`` ``(n_e, 6)``
-    their corners and edge midpoints, ``coords`` ``(n_p2, 2)``, ``keys`` the sorted edge keys (edge
-    node ``n_nodes + i``), ``slab_nodes`` ``(n_s, 3)`` the (left, middle, right) nodes of each slab's
-    face edge and ``slab_x`` ``(n_s, 2)`` its ends, ``pair_nodes`` ``(n_q, 2)`` the (upper, lower)
-    nodes of the contact pairs at ``pair_x``, ``slab_tri``, ``slab_sub`` (:func:`slab_triangles`)."""
-
-    n_nodes: int
-    n_straight: int  # the first rows of tri: the equilibrium space's straight triangles, in its order
-    tri: np.ndarray
-    nodes: np.ndarray
-    coords: np.ndarray
-    keys: np.ndarray
-    slab_nodes: np.ndarray
-    slab_x: np.ndarray
-    pair_nodes: np.ndarray
-    pair_x: np.ndarray
-    slab_tri: np.ndarray  # (n_s,): the element whose quadratic gives v on the slab, or -1 (the trace along y)
-    slab_sub: np.ndarray  # (n_s,): its sub-triangle on the face edge (X_j, X_j+1)
-
-    @property
-    def n_p2(self) -> int:
-        return len(self.coords)
-
-    def on_element(self, slab: np.ndarray) -> np.ndarray:
-        """Which of the slabs ``slab`` (-1: none) take an element's quadratic (:func:`slab_triangles`)."""
-        slab = np.asarray(slab)
-        if not len(self.slab_tri):
-            return np.zeros(slab.shape, bool)
-        return (slab >= 0) & (self.slab_tri[np.maximum(slab, 0)] >= 0)
-
-    def edge_node(self, a, b) -> np.ndarray:
-        """The node at the midpoint of each edge ``(a, b)`` of the straight triangles, -1 where there is none."""
-        k = edge_keys(a, b, self.n_nodes)
-        i = np.clip(np.searchsorted(self.keys, k), 0, max(len(self.keys) - 1, 0))
-        return np.where(self.keys[i] == k, self.n_nodes + i, -1) if len(self.keys) else np.full(k.shape, -1)
-
-    @property
-    def dofs(self) -> np.ndarray:
-        """``(n_T, 12)``: the global dofs ``2 k + c`` of each triangle's corners and midpoints."""
-        return (2 * self.nodes[:, :, None] + np.arange(2)).reshape(len(self.nodes), 12)
-
-
-def p2_layout(mesh, pieces) -> P2Layout:
-    """The :class:`P2Layout` of a mesh and its pieces (module docstring)."""
-    n = mesh.n_nodes
-    straight = pieces.nodes[pieces.kind == 0]
-    abc = pieces.nodes[pieces.kind == CONCAVE1]
-    abc = np.where((doubled_areas(mesh.points, abc) < 0)[:, None], abc[:, [0, 2, 1]], abc)  # counter-clockwise
-    tri = np.vstack([straight, abc])
-    nodes, coords = p2_dofs(mesh.points, tri)
-    keys = np.unique(edge_keys(tri, np.roll(tri, -1, axis=1), n))  # p2_dofs numbers edges in this order
-    plain = P2Layout(n, len(straight), tri, nodes, coords, keys, *(np.zeros((0, k), int) for k in (3, 2, 2)),
-                     np.zeros(0), np.zeros(0, int), np.zeros(0, int))
-
-    def face_mid(a, b):
-        m = plain.edge_node(a, b)
-        if np.any(m < 0):
-            raise MeshError("internal: a face edge without a P2 midpoint")  # pragma: no cover
-        return m
-
-    en = pieces.slabs.edge_nodes
-    slab_nodes = np.stack([en[:, 0], face_mid(en[:, 0], en[:, 1]), en[:, 1]], 1) if len(en) else \
-        np.zeros((0, 3), int)
-    up, lo = mesh.pairs.T
-    q = len(up)
-    pair_nodes = np.zeros((max(2 * q - 1, 0), 2), int)
-    pair_nodes[0::2] = mesh.pairs
-    pair_x = np.zeros(len(pair_nodes))
-    pair_x[0::2] = mesh.pair_x
-    if q > 1:
-        pair_nodes[1::2] = np.stack([face_mid(up[:-1], up[1:]), face_mid(lo[:-1], lo[1:])], 1)
-        pair_x[1::2] = 0.5 * (mesh.pair_x[:-1] + mesh.pair_x[1:])
-    slab_tri, slab_sub = slab_triangles(pieces, tri, n)
-    return P2Layout(n, len(straight), tri, nodes, coords, keys, slab_nodes,
-                    mesh.points[en, 0] if len(en) else np.zeros((0, 2)), pair_nodes, pair_x, slab_tri, slab_sub)
-
-
-def slab_triangles(pieces, tri: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """For every slab: the element whose quadratic gives ``v`` there, and the sub-triangle of its split on
-    the face edge ``AB``, or -1 (and 0) where ``v`` is the face edge's trace continued along y
-    (``concave2``). A segment (between the chord ``AB`` of ``T0 = (A, B, C)`` and a convex arc) takes
-    ``T0``'s quadratic continued beyond the chord; a ``concave1`` piece (``A, B, C`` less the sliver
-    between its chord and the concave arc) is the element ``A, B, C`` itself, its energy taken over the
-    body only (module docstring)."""
-    s = pieces.slabs
-    out_t, out_j = np.full(len(s), -1), np.zeros(len(s), int)
-    sel = np.flatnonzero(np.isin(pieces.kind[s.piece], (SEGMENT, CONCAVE1))) if len(s) else np.zeros(0, int)
-    if not len(sel):
-        return out_t, out_j
-    code = lambda t: np.sort(np.asarray(t, np.int64), 1) @ np.array([n * n, n, 1], np.int64)  # noqa: E731
-    tcode = code(tri)
-    order = np.argsort(tcode)
-    want = code(pieces.nodes[s.piece[sel]])
-    t = order[np.clip(np.searchsorted(tcode[order], want), 0, len(order) - 1)]
-    if np.any(tcode[t] != want):
-        raise MeshError("internal: a curved piece without its element")  # pragma: no cover
-    a, b = s.edge_nodes[sel].T
-    corners = tri[t]
-    on = (corners == a[:, None]) | (corners == b[:, None])  # (m, 3): the face edge's ends among X0, X1, X2
-    # the face edge is (X_j, X_j+1): the corner not on it is X_(j+2)
-    out_t[sel], out_j[sel] = t, (np.argmin(on, axis=1) + 1) % 3
-    return out_t, out_j
-
-
-def interpolation(layout: P2Layout) -> sp.csr_matrix:
-    """``(2 n_p2, 2 n_nodes)``: P1 nodal values to the P2 nodes (midpoints: the mean of the ends),
-    exact for affine displacements (rigid motions)."""
-    n, m = layout.n_nodes, len(layout.keys)
-    a, b = layout.keys // n, layout.keys % n
-    rows = np.concatenate([np.arange(n), n + np.arange(m), n + np.arange(m)])
-    cols = np.concatenate([np.arange(n), a, b])
-    vals = np.concatenate([np.ones(n), np.full(2 * m, 0.5)])
-    rows, cols = (np.stack([2 * r, 2 * r + 1], 1).ravel() for r in (rows, cols))
-    return sp.csr_matrix((np.repeat(vals, 2), (rows, cols)), shape=(2 * layout.n_p2, 2 * n))
 
 
 @dataclass(frozen=True, eq=False)
@@ -458,101 +323,3 @@ def assemble_p2_system(system: System) -> P2System:
     return P2System(layout=lay, supports=sup, rdof=rdof, Z=(Z @ W).tocsr(), K=K, kloc=kloc, local_dofs=dofs, f=f,
                     element=cond, interior_load=ui, ja=ja, jb=jb, eps=eps, anchors=anchors,
                     floating=floating, separating=separating, load_correction=correction, scales=system.scales)
-
-
-def face_middles(system_parts, ja: np.ndarray, jb: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
-    """The faces' middle unknowns: for every contact interval and face (upper, then lower), the r index
-    ``m`` of its middle's y value, the row ``gamma`` ``(len(m), n_r)`` with ``gamma . r`` the middle
-    Bernstein coefficient ``2 a(x_m) - (a(x_0) + a(x_1)) / 2`` of the face's ``v_y`` on the true face
-    (``a`` at the ends: the vertex values; in the middle: the trace's middle value, or on a segment its
-    triangle's quadratic at the arc's point, interior dofs condensed) and its constant part ``beta``
-    (the interior dofs' load) ``(len(m),)``."""
-    lay, sup, rdof, cond, ui, faces, n_r = system_parts
-    mid = np.concatenate([ja[1::2], jb[1::2]])
-    ends = np.stack([np.concatenate([ja[0:-1:2], jb[0:-1:2]]), np.concatenate([ja[2::2], jb[2::2]])], 1)
-    k = np.arange(len(mid))
-    rows, cols, vals = [k, k, k], [mid, ends[:, 0], ends[:, 1]], [np.full(len(mid), 2.0), np.full(len(mid), -0.5),
-                                                                 np.full(len(mid), -0.5)]
-    beta = np.zeros(len(mid))
-    n_c = len(ja) // 2
-    slabs = middle_slabs(lay, n_c)
-    seg = np.flatnonzero(lay.on_element(slabs))
-    if len(seg):
-        t, j = lay.slab_tri[slabs[seg]], lay.slab_sub[slabs[seg]]
-        P = sub_vertices(lay.coords[lay.tri[t]])[np.arange(len(t)), j]
-        xm = 0.5 * (lay.pair_x[0:-1:2] + lay.pair_x[2::2])[seg % n_c]
-        ym = np.where(seg < n_c, faces[0].value(xm), faces[1].value(xm))
-        N, _ = shapes_at(P, np.stack([xm, ym], 1)[:, None])
-        a20 = np.zeros((len(seg), 20))
-        a20[np.arange(len(seg))[:, None], 2 * SUB_NODES[j] + 1] = N[:, 0]
-        a12 = a20[:, :N_BOUNDARY] - np.einsum("mik,mi->mk", cond.R[t], a20[:, N_BOUNDARY:])
-        beta[seg] = np.einsum("mi,mi->m", a20[:, N_BOUNDARY:], ui[t])
-        nodes = lay.nodes[t]  # (m, 6): coefficients in the nodes' frames (q_c = sum_k frame[k, c] r_k)
-        coef = np.einsum("mnkc,mnc->mnk", sup.frame[nodes], a12.reshape(-1, 6, 2))
-        r = rdof[2 * nodes[:, :, None] + np.arange(2)]
-        live = r >= 0
-        vals[0][seg] = 0.0  # the middle's own 2: now in the quadratic's coefficients
-        rows.append(np.broadcast_to(seg[:, None, None], r.shape)[live])
-        cols.append(r[live])
-        vals.append(2.0 * coef[live])
-    gamma = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(len(mid), n_r))
-    return mid, gamma, beta
-
-
-def middle_slabs(lay: P2Layout, n_c: int) -> np.ndarray:
-    """``(2 n_c,)``: the slab under each contact interval of the upper, then the lower face, or -1."""
-    out = np.full(2 * n_c, -1)
-    if not len(lay.slab_nodes):
-        return out
-    key = edge_keys(lay.slab_nodes[:, 0], lay.slab_nodes[:, 2], lay.n_nodes)
-    order = np.argsort(key)
-    pn = lay.pair_nodes
-    want = np.concatenate([edge_keys(pn[0:-1:2, b], pn[2::2, b], lay.n_nodes) for b in (0, 1)])
-    i = order[np.clip(np.searchsorted(key[order], want), 0, len(order) - 1)]
-    return np.where(key[i] == want, i, -1)
-
-
-def middle_maps(mid: np.ndarray, gamma: sp.csr_matrix) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """``W`` and ``W^-1`` ``(n_r, n_r)`` with ``r = W r'``: ``r'`` is ``r`` but at the middles ``mid``, where it is
-    ``gamma . r``; ``r_m = (r'_m - sum_(k != m) gamma_k r_k) / gamma_m`` (the other unknowns stay)."""
-    n_r = gamma.shape[1]
-    g = gamma.tocoo()
-    own = gamma[np.arange(len(mid)), mid].A1
-    if np.any(np.abs(own) < 1e-3 * abs(gamma).max(axis=1).toarray().ravel()):
-        raise MeshError("internal: a face middle's own coefficient vanishes")  # pragma: no cover
-    keep = np.ones(n_r, bool)
-    keep[mid] = False
-    eye = sp.diags(keep.astype(float), format="csr")
-    inv = eye + sp.csr_matrix((g.data, (mid[g.row], g.col)), shape=(n_r, n_r))
-    off = g.col != mid[g.row]
-    W = eye + sp.csr_matrix((np.concatenate([1.0 / own, -g.data[off] / own[g.row[off]]]),
-                             (np.concatenate([mid, mid[g.row[off]]]), np.concatenate([mid, g.col[off]]))),
-                            shape=(n_r, n_r))
-    return W.tocsr(), inv.tocsr()
-
-
-def element_maps(kloc: np.ndarray, local: np.ndarray, mid: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
-    """Element matrices ``W_e^T k W_e`` in the variables of :func:`middle_maps`: ``W_e`` the rows of ``W`` on the
-    element's unknowns (each r index at its first local position). Every element holding a middle holds
-    every unknown its row names (the face edge's triangle, its slab): checked."""
-    where = np.full(W.shape[0], -1)
-    where[mid] = np.arange(len(mid))
-    hit_e, hit_i = np.nonzero((local >= 0) & (where[np.maximum(local, 0)] >= 0))
-    if not len(hit_e):
-        return kloc
-    loc = local[hit_e]  # (h, 12)
-    first = np.ones(loc.shape, bool)
-    for p in range(1, loc.shape[1]):  # 12 positions: a tied node repeats its master's index
-        first[:, p] = ~np.any(loc[:, :p] == loc[:, p:p + 1], axis=1)
-    first &= loc >= 0
-    rows = W[local[hit_e, hit_i]]  # (h, n_r)
-    block = rows[np.arange(len(hit_e))[:, None], np.maximum(loc, 0)].toarray() * first
-    if not np.allclose(block.sum(1), rows.sum(1).A1, rtol=1e-12, atol=1e-12 * abs(rows).max()):
-        raise MeshError("internal: a face middle's map names an unknown outside its element")  # pragma: no cover
-    elems = np.unique(hit_e)
-    We = np.broadcast_to(np.eye(kloc.shape[1]), (len(elems), kloc.shape[1], kloc.shape[1])).copy()
-    We[np.searchsorted(elems, hit_e), hit_i] = block
-    out = kloc.copy()
-    out[elems] = We.transpose(0, 2, 1) @ kloc[elems] @ We
-    return out
