@@ -1,7 +1,8 @@
 """Errors against a finer reference on outline bodies with arcs (issue 39, item 2): integrated
 over the common part of both meshes, what that leaves out reported and bounded, different
 bodies still refused; the failed-cases table names every key of a case; ``--quiet`` writes
-nothing to stderr when a case fails."""
+nothing to stderr when a case fails; ``C e(v)`` of a P2 displacement as the field the combined error
+against a finer reference integrates."""
 
 from __future__ import annotations
 
@@ -174,3 +175,32 @@ def test_quiet_study_writes_nothing_to_stderr(tmp_path, capfd):
     report = (out / "noisy.md").read_text()
     failed = report[report.index("## Failed cases"):]
     assert "stress_space" in failed and "TooLargeError" in failed
+
+
+@pytest.mark.parametrize("name, tri", [("cylinder-on-block", "type2"), ("hertz", "type1")])
+def test_p2_kinematic_field_is_the_p2_strain(name, tri):
+    """The field ``C e(v)`` of a P2 displacement (:func:`cvxdual.eq.fields.kinematic_field`), which
+    the combined error against a finer reference integrates, is the strain the certificate's own
+    exact-field error evaluates (``exact_errors``: the sub-triangles' vertex values, the slabs'
+    traces at each abscissa): with the field itself as the "exact" stress, ``||lam* - C e(v)||_A``
+    vanishes to rounding, on the curved pieces' slabs too; and its quadrature's values are its
+    values at the same points."""
+    from cvxdual.eq.bounds import exact_errors
+    from cvxdual.eq.fields import P2KinematicField, kinematic_field
+    sol = solve(load_scene(name), tri, 1, "fast", stress_space="eq", kinematic="p2")
+    f = kinematic_field(sol.space, sol.bounds["displacement"])
+    assert isinstance(f, P2KinematicField)
+    tol = 1e-10 * sol.scene.length_scale  # locate() absorbs rounding only
+
+    class Itself:
+        def stress(self, k, pts):
+            return f.at(pts, np.full(len(pts), k), tol)[0]
+
+    e = exact_errors(sol.space, sol.stress, sol.bounds["displacement"], Itself(), n=3, g=sol.column_stress)
+    # a difference of two evaluations of one linear function: rounding (1.6e-16 measured) below 1e-12
+    assert e["displacement_a"] <= 1e-12 * e["reference_A"]
+    pts, w, body, vals, cell = f.rule(3)
+    at, where = f.at(pts, body, tol)
+    assert np.array_equal(where, cell)  # every point in the cell the rule put it in
+    assert np.abs(vals - at).max() <= 1e-12 * np.abs(vals).max()  # the same values, to rounding (4e-16 measured)
+    assert (cell < 0).any() == (name == "cylinder-on-block")  # the slabs are covered where there are any

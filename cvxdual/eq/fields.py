@@ -1,7 +1,8 @@
 """The equilibrium space's stress field (:class:`EquilibriumField`: linear on every sub-triangle of
 the straight pieces, the column stress ``(0, g(x), 0)`` on the curved ones) behind the interface of
-:class:`cvxdual.system.field.StressField`, and ``C e(v)`` of a displacement as a piecewise-constant
-field (:func:`kinematic_field`)."""
+:class:`cvxdual.system.field.StressField`, and ``C e(v)`` of a certificate's displacement as a field
+(:func:`kinematic_field`): piecewise constant for P1, linear on every sub-triangle for P2
+(:class:`P2KinematicField`)."""
 
 from __future__ import annotations
 
@@ -117,9 +118,13 @@ class EquilibriumField(StressField):
         return pts, w, body, vals, cell
 
 
-def kinematic_field(space, v: np.ndarray) -> PieceField:
-    """``C e(v)`` of a displacement ``v (n_nodes, 2)`` of ``V_h``: constant on every straight
-    triangle and on every slab of the curved pieces (its strain along the slab's face edge)."""
+def kinematic_field(space, v) -> StressField:
+    """``C e(v)`` of a certificate's displacement ``v``: P1 nodal values ``(n_nodes, 2)`` give a
+    :class:`~cvxdual.system.field.PieceField`, constant on every straight triangle and on every slab of
+    the curved pieces (its strain along the slab's face edge); a
+    :class:`~cvxdual.system.p2_displacement.P2Displacement` gives a :class:`P2KinematicField`."""
+    if not isinstance(v, np.ndarray):
+        return P2KinematicField.of_displacement(space, v)
     from .bounds import slab_strains, strains
     stiff = stiffnesses(space.scene)
     pieces = space.pieces
@@ -127,3 +132,43 @@ def kinematic_field(space, v: np.ndarray) -> PieceField:
     per_piece[:space.n_tri] = np.einsum("tij,tj->ti", stiff[space.body], strains(space, v))
     slab = np.einsum("sij,sj->si", stiff[pieces.slabs.body], slab_strains(space, v))
     return PieceField(space.scene, space.mesh, pieces, per_piece, slab=slab)
+
+
+@dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==
+class P2KinematicField(EquilibriumField):
+    """``C e(v)`` of a P2 displacement ``v`` (:class:`~cvxdual.system.p2_displacement.P2Displacement`),
+    exact everywhere on the space's pieces. On the straight pieces ``e(v)`` of a quadratic on each
+    sub-triangle is linear there and ``C`` is constant per body: the vertex values ``C e(v)`` at the
+    sub-triangles' vertices (``v.sub_strains``, the equilibrium stresses' layout) interpolate it exactly,
+    as :class:`EquilibriumField` does. On the curved pieces ``v`` is an element's quadratic (a segment, a
+    type-1 concave piece) or its face edge's trace continued along ``y`` (type 2): ``e(v)`` is evaluated
+    at every point (``v.slab_strains``), not as a column stress, so it is exact there too (the only
+    error of a distance to it is that of the quadrature that integrates it)."""
+
+    displacement: object = None
+
+    @classmethod
+    def of_displacement(cls, space, v) -> P2KinematicField:
+        stiff = stiffnesses(space.scene)
+        ce = np.einsum("tij,tsaj->tsai", stiff[space.body], v.sub_strains(space.X)).reshape(-1, 3, 3)
+        return cls(space.scene, space.mesh, space.pieces, ce, space=space, g=np.zeros((len(space.columns), 2)),
+                   displacement=v)
+
+    def _slab_values(self, slab: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        stiff = stiffnesses(self.scene)[self.space.pieces.slabs.body[slab]]
+        return np.einsum("mij,mj->mi", stiff, self.displacement.slab_strains(slab, pts))
+
+    def in_pieces(self, pts: np.ndarray, loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out, cell = super().in_pieces(pts, loc)  # the straight pieces' values; the slab of each curved point
+        cu = np.flatnonzero(cell < 0)
+        if len(cu):
+            out[cu] = self._slab_values(-1 - cell[cu], pts[cu])
+        return out, cell
+
+    def rule(self, n: int, cells: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        pts, w, body, vals, cell = super().rule(n, cells)
+        cu = np.flatnonzero(cell < 0)
+        if len(cu):
+            vals = vals.copy()
+            vals[cu] = self._slab_values(-1 - cell[cu], pts[cu])
+        return pts, w, body, vals, cell

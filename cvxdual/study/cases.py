@@ -40,12 +40,12 @@ EDGE_RADIUS = 0.1  # times a: the discs around the Hertz contact edges (0.03% of
 
 # What a cached entry must hold to be used (JSON types: a number is int or float, a NaN is None)
 TEXT, INT, NUM, MAYBE = (str,), (int,), (int, float), (int, float, type(None))
-ROW_TYPES = {"scene": TEXT, "triangulation": TEXT, "stress_space": TEXT, "level": INT, "solver": TEXT,
-             "overrides": TEXT, "n_pieces": INT, "h": NUM, "error_l2": MAYBE, "error_l2_rel": MAYBE,
+ROW_TYPES = {"scene": TEXT, "triangulation": TEXT, "stress_space": TEXT, "kinematic": TEXT, "level": INT,
+             "solver": TEXT, "overrides": TEXT, "n_pieces": INT, "h": NUM, "error_l2": MAYBE, "error_l2_rel": MAYBE,
              "reference": TEXT, "status": TEXT, "t_total": MAYBE, "worker": TEXT}
 REQUIRED = tuple(ROW_TYPES)
-IDENTITY = ("study", "case", "group", "scene", "overrides", "units", "triangulation", "stress_space", "level",
-            "solver", "reference")  # a row of this case: these columns are its base_row's
+IDENTITY = ("study", "case", "group", "scene", "overrides", "units", "triangulation", "stress_space", "kinematic",
+            "level", "solver", "reference")  # a row of this case: these columns are its base_row's
 NUMERIC = {"h_min", "h_ratio", "iterations", "duality_gap", "contact_x_min", "contact_x_max", "peak_pressure",
            "total_force", "peak_mb", "reference_error_est", "edge_error_share", "effectivity", "bound_energy_rel",
            "ref_dropped_area", "ref_dropped_share"}
@@ -193,7 +193,8 @@ def reference_field(scene, ref: Reference, level: int, cache: Cache, keep: bool 
         hit = load_eq_reference(cache, key, space.n_tri, len(space.columns))
         computed = hit is None
         if computed:
-            sol = solve(scene, ref.triangulation, level, ref.solver, stress_space="eq", check=True)
+            # its stresses do not depend on the kinematic side; its certified bound is P2's, the sharper
+            sol = solve(scene, ref.triangulation, level, ref.solver, stress_space="eq", check=True, kinematic="p2")
             b = sol.bounds
             hit = {"stress": np.asarray(sol.stress, float), "column": np.asarray(sol.column_stress, float),
                    "bound": np.array([b["error_bound"] / np.sqrt(2.0 * b["complementary_energy"])])}
@@ -287,8 +288,8 @@ def base_row(case: Case) -> dict:
     units = "" if case.units is None else f"{case.units[2]}, {case.units[3]}"
     return {"study": case.study, "case": case.name, "group": case.group, "scene": case.scene,
             "overrides": case.overrides_text, "units": units,
-            "triangulation": case.triangulation, "stress_space": case.stress_space, "level": case.level,
-            "solver": case.solver, "reference": case.reference.label(), **dict(case.tags)}
+            "triangulation": case.triangulation, "stress_space": case.stress_space, "kinematic": case.kinematic,
+            "level": case.level, "solver": case.solver, "reference": case.reference.label(), **dict(case.tags)}
 
 
 def run_case(case: Case, ref_info: dict | None, cache_root: str | None, key: str) -> dict:
@@ -329,6 +330,7 @@ def _compute(case: Case, ref_info: dict | None, cache: Cache, key: str) -> dict:
         return _limit(case, scene)
     kw = dict(case.solver_options)
     kw["stress_space"] = case.stress_space
+    kw["kinematic"] = case.kinematic  # the certificate's side: eq rows and rows with bounds; a p0 solve ignores it
     if dict(case.tags).get("timing") == "steady":
         # one-time library start-up first (imports, solver set-up), as the limit excludes its own
         from ..linalg.factor import start_up
@@ -445,9 +447,12 @@ def _errors(case: Case, scene, sol, ref_info: dict | None, cache: Cache) -> dict
 def _combined(field, sol, err: dict, m: dict) -> dict:
     """What the certificate bounds, measured against the reference ``lam*``: the combined error
     ``sqrt(||sigma - lam*||_A^2 + ||lam* - C e(v)||_A^2)`` (``= ||u - v||_a`` for the second term)
-    of an equilibrium solution, and the effectivity ``sqrt(2G)`` over it."""
+    of an equilibrium solution, and the effectivity ``sqrt(2G)`` over it. ``v`` is the certificate's
+    own displacement (``bounds["displacement"]``): P1 nodal values (``sol.displacement`` itself), or a
+    P2 displacement whose ``C e(v)`` is linear on every sub-triangle and exact on the slabs
+    (:class:`~cvxdual.eq.fields.P2KinematicField`), never its nodal values read as P1."""
     from ..eq.fields import kinematic_field
-    kin = distance(field, kinematic_field(sol.space, sol.displacement), m["ref_rule"], m["ref_fine"])
+    kin = distance(field, kinematic_field(sol.space, sol.bounds["displacement"]), m["ref_rule"], m["ref_fine"])
     combined = float(np.hypot(err["energy"], kin["energy"]))
     return {"error_combined": combined,
             "effectivity": sol.bounds["error_bound"] / combined if combined > 0 else np.nan}

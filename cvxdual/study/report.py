@@ -43,7 +43,7 @@ def measured_rows(df: pd.DataFrame) -> pd.DataFrame:
 def series_keys(df: pd.DataFrame) -> list[str]:
     """The columns that tell series apart: scene, triangulation, and whatever else varies."""
     keys = ["scene", "triangulation"]
-    for c in ("stress_space", "overrides", "solver", "units", "case"):
+    for c in ("stress_space", "kinematic", "overrides", "solver", "units", "case"):
         if c in df.columns and df[c].astype(str).nunique() > 1:
             keys.append(c)
     return keys

@@ -393,7 +393,7 @@ def _compare(rows: list[dict], solvers: tuple, store: Cache) -> None:
     groups: dict = {}
     for r in rows:
         k = tuple(str(r.get(c)) for c in ("case", "group", "scene", "overrides", "units", "triangulation",
-                                          "stress_space", "level"))
+                                          "stress_space", "kinematic", "level"))
         groups.setdefault(k, {})[r.get("solver")] = r
     for g in groups.values():
         b = g.get(ref_name)

@@ -7,6 +7,8 @@ A spec is a table (a TOML file, or the ``SPEC`` dict of a Python file) of
   ``{source, label, levels, set, reference}``;
 - ``triangulations``, ``stress_spaces`` (``"p0"``, ``"eq"``), ``levels``, ``solvers`` (CVXPY
   names, ``"fast"``, or ``"limit"``: one factorisation of the stiffness), lists;
+- ``kinematic``: the certificate's kinematic side (``"p2"``, the default, or ``"p1"``), a name or a
+  list (an axis like ``triangulations``); it changes the eq rows and rows with bounds only;
 - ``set``: a grid of ``--set`` overrides, ``{"dotted.key" = [value, ...]}`` (product over keys);
 - ``reference``: ``"exact"`` (the scene's closed-form field), ``"none"``, or a finer level
   ``{level = 7}`` / ``{levels_above = 2}`` (``triangulation = "type2"``, ``solver = "fast"`` and
@@ -45,7 +47,7 @@ from typing import Literal, get_args
 
 from ..errors import CvxdualError
 from ..geometry.triangulation import TRIANGULATIONS
-from ..kinds import SPACE_NAMES, Space
+from ..kinds import SPACE_NAMES, Kinematic, Space
 from ..validate import file_stem
 
 PSEUDO_SOLVERS = ("fast", "limit")
@@ -54,12 +56,13 @@ Isolate = Literal["none", "process"]  # how a case runs: in the worker, or in a 
 CheckAt = Literal["finest", "all", "none"]  # metrics.check: the levels the finer rules also integrate
 METRIC_DEFAULTS = {"rule": 6, "check_rule": 10, "ref_rule": 2, "ref_fine": 6, "ref_check_rule": 3,
                    "ref_check_fine": 8, "check": "finest", "edge_share": False}
-KEYS = {"name", "title", "description", "scenes", "triangulations", "stress_spaces", "levels", "solvers", "set",
-        "reference", "metrics", "check", "solver_options", "units", "compare", "isolate", "timeout", "profile",
+KEYS = {"name", "title", "description", "scenes", "triangulations", "stress_spaces", "kinematic", "levels", "solvers",
+        "set", "reference", "metrics", "check", "solver_options", "units", "compare", "isolate", "timeout", "profile",
         "tags", "cases", "quick", "hooks", "group", "report", "overrides"}
 BLOCK_KEYS = KEYS - {"name", "title", "description", "cases", "hooks", "report"} | {"name"}
 DEFAULT_CACHE = ".cache/cvxdual"  # finished cases, for resuming
 DEFAULT_MEMORY = "4GB"  # per local worker
+DEFAULT_KINEMATIC = Kinematic.P2.value  # solve()'s own default
 
 
 class StudyError(CvxdualError, ValueError):
@@ -96,6 +99,7 @@ class Case:
     units: tuple | None
     triangulation: str
     stress_space: str
+    kinematic: str  # the certificate's kinematic side, "p1" or "p2" (what solve(kinematic=...) takes)
     level: int
     solver: str
     solver_options: tuple  # ((name, value), ...)
@@ -309,8 +313,8 @@ def load_spec(source, quick: bool = False) -> Study:
                          else "")
     if not cases:
         raise StudyError("study spec: no cases; give scenes and levels")
-    keys = [repr((c.name, c.scene_source, c.overrides, c.units, c.triangulation, c.stress_space, c.level, c.solver,
-                  c.tags)) for c in cases]
+    keys = [repr((c.name, c.scene_source, c.overrides, c.units, c.triangulation, c.stress_space, c.kinematic, c.level,
+                  c.solver, c.tags)) for c in cases]
     if len(set(keys)) != len(keys):
         raise StudyError("study spec: the same case appears twice; give blocks different names or settings")
     compare = raw.get("compare")
@@ -338,6 +342,17 @@ def _solver(s) -> str:
     if not isinstance(s, str) or not s:
         raise StudyError(f"study spec: bad solver {s!r}; give a CVXPY solver name, 'fast' or 'limit'")
     return s.lower() if s.lower() in PSEUDO_SOLVERS else s.upper()
+
+
+def _kinematic(k, where: str) -> str:
+    """A kinematic side's name as ``solve`` takes it (``"p1"``, ``"p2"``), or a one-line error."""
+    if isinstance(k, str):
+        try:
+            return Kinematic.parse(k).value
+        except CvxdualError:
+            pass
+    raise StudyError(f"study spec {where}: unknown kinematic side {str(k)[:40]!r}; use \"p2\" (the default) or "
+                     "\"p1\", or a list of them")
 
 
 def _reference(v, levels: list[int], where: str) -> Reference:
@@ -385,6 +400,7 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
     for s in spaces:
         if s not in SPACE_NAMES:
             raise StudyError(f"study spec {w}: unknown stress space {s!r}; use one of {', '.join(SPACE_NAMES)}")
+    kinematics = [_kinematic(k, w) for k in _list(d.get("kinematic", [DEFAULT_KINEMATIC]), "kinematic", w)]
     solvers = [_solver(s) for s in _list(d.get("solvers", ["CLARABEL"]), "solvers", w)]
     metrics = {**METRIC_DEFAULTS, **(d.get("metrics") or {})}
     bad = set(metrics) - set(METRIC_DEFAULTS)
@@ -430,14 +446,14 @@ def _expand(study: str, d: dict, base: Path, hooks: str | None, where: str) -> l
         label = entry.get("label")
         for combo in itertools.product(*axes) if axes else [()]:
             over = tuple(fixed) + tuple(combo)
-            for tri, space, solver in itertools.product(tris, spaces, solvers):
+            for tri, space, kin, solver in itertools.product(tris, spaces, kinematics, solvers):
                 for level in levels:
                     check_rule = Space.parse(space) is Space.P0 and (metrics["check"] == "all"
                                                     or (metrics["check"] == "finest" and level == max(levels)))
                     out.append(Case(
                         study=study, name=str(d.get("name", "")), group=str(d.get("group", "")),
                         scene_source=src, scene=str(label or ""), overrides=over, units=units,
-                        triangulation=tri, stress_space=space, level=level, solver=solver,
+                        triangulation=tri, stress_space=space, kinematic=kin, level=level, solver=solver,
                         solver_options=tuple(sorted((opts.get(solver) or {}).items())),
                         check=bool(d.get("check", True)), reference=ref, metrics=tuple(sorted(metrics.items())),
                         check_rule=check_rule and ref.kind != "none", save_stress=False, isolate=isolate,
