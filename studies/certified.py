@@ -17,9 +17,13 @@ beyond the face strip).
 - Times: ``time.perf_counter()`` around the ``solve`` call, after one untimed warm-up solve of each
   scene at level 0 (eq with P2 bounds, and P0: imports, gmsh, library start-up are not counted);
   the solve's own error against a scene's exact field (``timings["error"]``, which a scene
-  without one never pays) is taken off and shown apart. Solves under :data:`REPEAT_BELOW` s run
+  without one never pays) is taken off and shown apart. The outline meshes gmsh made (kept in the
+  process for the run's own coarse levels) are forgotten before every timed solve: each pays its
+  meshing, as a fresh run would. Solves under :data:`REPEAT_BELOW` s run
   three times, the median kept. The time to a target is that of the first level reaching it
-  (measured, never interpolated).
+  (measured, never interpolated), timed again side by side: each side's decisive solve in turns
+  (P2, P0, P1), :data:`ROUNDS` rounds, the median (the sides see the same background load; single
+  runs of a few seconds differed by 10-20% on a shared machine).
 - The P0 error: against the exact field where the scene declares one (hertz, hertz-outline; the
   solve's own ``error``); elsewhere against the equilibrium stresses two levels finer (same
   triangulation, fast route; their stresses do not depend on the kinematic side), integrated on the
@@ -44,6 +48,7 @@ import pandas as pd
 
 import cvxdual as cd
 from cvxdual.files import write_text
+from cvxdual.geometry.outline.mesher import forget_meshes
 from cvxdual.study.report import md_table
 from cvxdual.system.field import field_distance
 
@@ -59,9 +64,9 @@ TARGET = 0.01
 CAP = 60.0  # seconds: no level whose solve is predicted to take longer
 REF_CAP = 120.0  # seconds: an eq reference (untimed) predicted to take longer is not solved
 GROWTH = 4.5  # a level's time over the last one's, for the predictions (4x the pieces, sparse factorisations)
-REPEAT_BELOW = 20.0  # seconds: a shorter solve is timed three times (the median): single runs of a few
-# seconds differed by 10-20% on this shared machine, as much as the P2 and P0 times on cylinder-on-block
+REPEAT_BELOW = 2.0  # seconds: a shorter solve of the level-by-level search is timed three times (the median)
 MAX_LEVEL = 8
+ROUNDS = 3  # the final side-by-side timings: rounds of every side's decisive solve, in turns
 
 
 def timed(run) -> tuple[object, float, float, int]:
@@ -69,6 +74,7 @@ def timed(run) -> tuple[object, float, float, int]:
     :data:`REPEAT_BELOW` s), that error's time, and the number of runs."""
     times, errs = [], []
     for _ in range(3):
+        forget_meshes()  # a whole run meshes its outline bodies (gmsh): none kept from the last one
         t0 = time.perf_counter()
         sol = run()
         wall = time.perf_counter() - t0
@@ -179,7 +185,33 @@ def run(target: float, scenes: dict, log=print) -> tuple[pd.DataFrame, dict]:
         p0, how[label] = uncertified(scene, tri, target, log, eq_fields, eq_times)
         rows += [{"scene": label, "triangulation": tri, **r} for r in p0]
         del eq_fields
+        side_by_side(scene, tri, [r for r in rows if r["scene"] == label], log)
     return pd.DataFrame(rows), how
+
+
+def side_by_side(scene, tri: str, rows: list[dict], log) -> None:
+    """The first level of each side that reaches the target, timed again in turns (P2, P0, P1, then
+    again, :data:`ROUNDS` rounds): each side's median is ``time_side_by_side_s`` of its row. The
+    sides then see the same background load (other processes on a shared machine), which the
+    level-by-level search, one side after the other, does not promise."""
+    picks = {}
+    for side in ("eq p2", "p0", "eq p1"):
+        hit = [r for r in rows if r["side"] == side and r["reached"]]
+        if hit:
+            picks[side] = min(hit, key=lambda r: r["level"])
+    runs = {side: partial(cd.solve, scene, tri, r["level"], "fast", **(
+        {"stress_space": "eq", "kinematic": side.split()[1]} if side != "p0" else {})) for side, r in picks.items()}
+    times: dict = {side: [] for side in picks}
+    for _ in range(ROUNDS):
+        for side, solve in runs.items():
+            forget_meshes()
+            t0 = time.perf_counter()
+            sol = solve()
+            times[side].append(time.perf_counter() - t0 - float(sol.timings.get("error", 0.0)))
+            del sol
+    for side, r in picks.items():
+        r["time_side_by_side_s"] = float(np.median(times[side]))
+        log({"side": side, "level": r["level"], "side by side": [round(t, 4) for t in times[side]]})
 
 
 def _first(g: pd.DataFrame) -> pd.Series | None:
@@ -191,6 +223,11 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
     """Per scene and side: the first level reaching the target, its pieces, bound or error, time,
     and the ratio to P0's time."""
     out = []
+    df = df.copy()
+    if "time_side_by_side_s" not in df:
+        df["time_side_by_side_s"] = np.nan
+    # the time of a side's decisive level: its side-by-side median where it has one
+    df["time"] = df.time_side_by_side_s.where(df.time_side_by_side_s.notna(), df.time_s)
     for scene, g in df.groupby("scene", sort=False):
         p0 = _first(g[g.side == "p0"])
         for side in [f"eq {k}" for k in SIDES] + ["p0"]:
@@ -205,7 +242,7 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
             else:
                 r.update({"level": str(int(hit.level)), "pieces": int(hit.pieces),
                           "bound / error": hit.bound_rel if side != "p0" else hit.error_l2_rel,
-                          "time [s]": hit.time_s, "time / P0's": hit.time_s / p0.time_s if p0 is not None
+                          "time [s]": hit.time, "time / P0's": hit.time / p0.time if p0 is not None
                           else np.nan})
             before = gs[gs.level == int(hit.level) - 1] if hit is not None else gs.iloc[:0]
             r["one level coarser"] = np.nan if not len(before) else \
@@ -218,7 +255,7 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def report(df: pd.DataFrame, how: dict, target: float, quick: bool) -> str:
+def report(df: pd.DataFrame, how: dict, target: float, quick: bool, load: tuple = ()) -> str:
     s = summary(df)
     pct = f"{100 * target:g}%"
     lines = [f"# Time to a certified {pct}", "",
@@ -226,7 +263,9 @@ def report(df: pd.DataFrame, how: dict, target: float, quick: bool) -> str:
              f"({platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python "
              f"{platform.python_version()}, cvxdual {cd.__version__}; thread settings: "
              + (", ".join(f"{k}={os.environ[k]}" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-                          if k in os.environ) or "the libraries' defaults") + "). See its docstring for the method.",
+                          if k in os.environ) or "the libraries' defaults") + ")"
+             + (f"; load average (1 min) {load[0]:.2f} at the start and {load[1]:.2f} at the end: other processes "
+                "share the machine" if load else "") + ". See its docstring for the method.",
              "",
              f"Each eq side is `cvxdual.solve(scene, triangulation, level, \"fast\", stress_space=\"eq\", "
              f"kinematic=...)`, level by level from 0 until `bounds.error_bound_rel <= {target:g}` (the certified "
@@ -234,10 +273,13 @@ def report(df: pd.DataFrame, how: dict, target: float, quick: bool) -> str:
              f"(`cvxdual.solve(..., \"fast\")`) until its relative L2 stress error is at most {target:g}, which "
              "nothing certifies. A time is `time.perf_counter()` around the whole call (mesh, assembly, solve, "
              "recovery, bounds), after an untimed warm-up solve of each scene at level 0 (imports, gmsh and library "
-             "start-up not counted), less the solve's own error against an exact field where the scene declares "
-             f"one (column `exact_error_s`; a run without an exact field does not pay it); solves under "
+             "start-up not counted; the outline meshes kept in the process forgotten before every timed solve: each "
+             "pays gmsh's meshing as a fresh run), less the solve's own error against an exact field where the "
+             f"scene declares one (column `exact_error_s`; a run without an exact field does not pay it); solves under "
              f"{REPEAT_BELOW:g} s are the median of three. The time to the target is the measured time of the first "
-             f"level that reaches it. A side stops where its next solve is predicted (x{GROWTH:g} a level) to take "
+             f"level that reaches it, timed again side by side: the decisive solves of P2, P0 and P1 in turns, "
+             f"{ROUNDS} rounds, the median (column `time_side_by_side_s`). A side stops where its next solve is "
+             f"predicted (x{GROWTH:g} a level) to take "
              f"more than {CAP:g} s: \"not reached by level L\". `pieces`: the mesh's pieces (triangles and curved "
              "pieces, the same mesh for every side); `time / P0's`: over P0's time to its uncertified target; "
              "`one level coarser`: the bound (P0: the error) at the level below, which misses the target.", "",
@@ -253,7 +295,7 @@ def report(df: pd.DataFrame, how: dict, target: float, quick: bool) -> str:
               "gmsh meshes beyond the face strip); no other example was needed.", ""]
     lines += ["## What it says", ""] + _findings(s, df, target) + [""]
     cols = ["scene", "triangulation", "side", "level", "pieces", "bound_rel", "guaranteed", "error_l2_rel",
-            "ref_dropped_share", "time_s", "exact_error_s", "runs", "reached", "error_kind"]
+            "ref_dropped_share", "time_s", "time_side_by_side_s", "exact_error_s", "runs", "reached", "error_kind"]
     lines += ["## Every level", "", "`error_l2_rel` of an eq row: its stresses against the exact field where the "
               "scene has one (the stresses of both sides are the same).", "",
               md_table(df[[c for c in cols if c in df]]), ""]
@@ -306,11 +348,13 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     out = Path(args.out or ("out/certified-quick" if args.quick else "reports"))
     target = 0.1 if args.quick else TARGET
+    load0 = os.getloadavg()[0]
     df, how = run(target, SCENES, log=lambda r: print({k: (round(v, 4) if isinstance(v, float) else v)
                                                         for k, v in r.items()}, flush=True))
+    load = (load0, os.getloadavg()[0])
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / "certified.csv", df.to_csv(index=False, float_format="%.6g"))
-    write_text(out / "certified.md", report(df, how, target, args.quick))
+    write_text(out / "certified.md", report(df, how, target, args.quick, load))
     print(f"wrote {out / 'certified.md'}")
     return 0
 
