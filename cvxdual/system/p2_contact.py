@@ -98,7 +98,7 @@ def element_maps(kloc: np.ndarray, local: np.ndarray, mid: np.ndarray, W: sp.csr
         return kloc
     loc = local[hit_e]  # (h, 12)
     first = np.ones(loc.shape, bool)
-    for p in range(1, loc.shape[1]):  # 12 positions: a tied node repeats its master's index
+    for p in range(1, loc.shape[1]):  # 12 positions: an r index may repeat (generality)
         first[:, p] = ~np.any(loc[:, :p] == loc[:, p:p + 1], axis=1)
     first &= loc >= 0
     rows = W[local[hit_e, hit_i]]  # (h, n_r)

@@ -51,7 +51,7 @@ CHUNK = 4096  # triangles whose 20 x 20 element matrices exist at once (about 13
 class P2System:
     """The assembled P2 displacement problem of one P1 :class:`~cvxdual.system.assembly.System`'s mesh:
     element matrices in the nodes' frames (``kloc``, triangles' condensed 12 x 12 then the slabs'
-    6 x 6 padded to 12), the global stiffness ``K``, loads ``f`` (balanced), supports and ties
+    6 x 6 padded to 12), the global stiffness ``K``, loads ``f`` (balanced), supports
     (``rdof``, ``Z``), the contact pairs (``ja``, ``jb``, ``eps``) and the rigid motions, with
     what the interior recovery needs (``element``, ``interior_load``)."""
 
@@ -156,7 +156,7 @@ def p2_rigid_modes(cand: np.ndarray, K: sp.csr_matrix, sup: Supports, rdof: np.n
     """The rigid motions of the P2 space in r, ``floating`` (keeping the bodies together) and
     ``separating``, as :func:`cvxdual.system.rigid.rigid_modes` finds them for P1: combinations of the
     candidates ``cand`` (the bodies' translations and rotations at the P2 nodes, ``(n_dofs, 6)``) that
-    respect the supports and ties and have no energy in ``K``. P2 interpolates them exactly; which are
+    respect the supports and have no energy in ``K``. P2 interpolates them exactly; which are
     free differs from P1 where P1 holds a rotation that P2 does not (a segment's continued quadratic is
     not strained by a rotation, a P1 slab's trace along y is)."""
     n_dofs = len(rdof)

@@ -30,12 +30,13 @@ from .displacement import NOTHING_ACTS, nothing_acts
 @dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==
 class Solved:
     """What a space's :meth:`~StressSpace.solve` gives its :meth:`~StressSpace.recover`: the stresses
-    (the space's layout), the column stresses where the space has them, the P1 displacement
-    ``u`` ``(n_dofs,)``, the solver's statistics, the time spent building a CVXPY problem, and a
-    finished solution where a CVXPY model recovers its own (friction)."""
+    (the space's layout), the column stresses where the space has them, the displacement of the
+    kinematic side ``u`` (P1: ``(n_dofs,)``; P2: a ``P2Displacement``), the solver's statistics, the
+    time spent building a CVXPY problem, and a finished solution where a CVXPY model recovers its own
+    (friction)."""
 
     stress: np.ndarray
-    u: np.ndarray
+    u: object
     stats: SolverStats
     column: np.ndarray | None = None
     build_time: float = 0.0
