@@ -160,7 +160,7 @@ def admissible_p2(space: EquilibriumSpace, v: P2Displacement) -> tuple[P2Displac
             break
         M = gap_curvature_bound(space, x0, x1) + 2.0 * arc_excess(space, out, slabs) / (x1 - x0) ** 2
         jn = np.append(j[:, 0], j[-1, 2])
-        qn, qm = restore_admissible(xv, ev, M, jn, j[:, 1], margin)
+        qn, qm = restore_admissible(xv, ev, M, jn, j[:, 1], 2.0 * margin)  # aim above: converges to >= margin
         shift = np.zeros(len(lay.pair_x))
         shift[0::2], shift[1::2] = jn - qn, (j[:, 1] - qm) / gain
         shift *= 1.0 + OVERSHOOT
