@@ -1,18 +1,18 @@
 """The certificate's terms of a P2 displacement (:class:`~cvxdual.system.p2_displacement.P2Displacement`,
 docs/equilibrium.md section 12), registered with :func:`cvxdual.eq.bounds.kinematic_terms`.
 
-Everything is integrated exactly, as for P1: the strain of a P2 displacement is linear on every
-sub-triangle, so ``sigma - C e(v)`` is linear there and the P1 mass matrix integrates its energy
-(:func:`~cvxdual.eq.bounds.sub_energy`); on a slab the trace's strain is linear in x (Gauss in x
-times the slab's height, as the column stresses); on a contact edge the jump is quadratic and the
-pressure linear (Gauss); the loads are linear on edges, the trace quadratic (Simpson is exact);
-beyond the free arcs the neighbouring polynomial is continued and integrated on the exact region
+Everything is integrated exactly where the integrand is a polynomial, as for P1: the strain of a P2
+displacement is linear on every sub-triangle, so ``sigma - C e(v)`` is linear there and the P1 mass
+matrix integrates its energy (:func:`~cvxdual.eq.bounds.sub_energy`); the curved pieces by rules exact
+in y (:func:`slab_rule`); the contact edges with the jump on the true faces (Gauss); the loads are
+linear on edges, the trace quadratic (Simpson is exact); beyond the free arcs the neighbouring
+polynomial is continued and integrated on the exact region
 (:meth:`~cvxdual.geometry.mesh.Mesh.continuation_rule`). Pointwise admissibility on the contact
-interval is the guaranteed check of :mod:`cvxdual.system.quadratic_gap` with the gap's curvature
-bound. The solve already holds every interval's Bernstein coefficients below the gap's
-(:mod:`cvxdual.system.p2_system`), which is sufficient, so only rounding can leave a bound short;
-there the lower face (or the upper where the lower is held) is lowered by the least quadratic that
-restores it (:func:`~cvxdual.system.quadratic_gap.restore_admissible`).
+interval is the guaranteed check of :mod:`cvxdual.system.quadratic_gap` with the gap's curvature bound,
+raised where the face's value is an element's quadratic off its chord (:func:`arc_excess`). The solve
+holds every interval's Bernstein coefficients below the gap's (:mod:`cvxdual.system.p2_contact`), which
+suffices on traces; off the chord, and for rounding, the lower face (or the upper where the lower is
+held) is lowered by the least quadratic that restores the check (:func:`admissible_p2`).
 """
 
 from __future__ import annotations
