@@ -370,9 +370,7 @@ def _locking(eq: pd.DataFrame, p0: pd.DataFrame) -> list[str]:
             r = _nu_ratio(gt, "error_l2_rel")
             if len(r):
                 what = f"`{sp}`" + (f", {tri}" if g.triangulation.nunique() > 1 else "")
-                out.append(f"- locking, {what}: error at nu = 0.4999 over error at nu = 0.3, levels "
-                           f"{', '.join(str(int(x)) for x in r.index)}: {', '.join(f'{v:.2f}' for v in r)}"
-                           + (" (within 2x)" if r.max() <= 2 else " (not within 2x)") + ".")
+                out.append(_ratio_line(f"locking, {what}: error at nu = 0.4999 over error at nu = 0.3", r))
     return out
 
 
@@ -384,10 +382,14 @@ def _certified_locking(eq: pd.DataFrame) -> list[str]:
         r = _nu_ratio(g, "bound_energy_rel")
         if len(r):
             what = f"`{k}`" + (f", {tri}" if eq.triangulation.nunique() > 1 else "")
-            out.append(f"- certified relative error, {what}: nu = 0.4999 over nu = 0.3, levels "
-                       f"{', '.join(str(int(x)) for x in r.index)}: {', '.join(f'{v:.2f}' for v in r)}"
-                       + (" (within 2x)" if r.max() <= 2 else " (not within 2x)") + ".")
+            out.append(_ratio_line(f"certified relative error, {what}: nu = 0.4999 over nu = 0.3", r))
     return out
+
+
+def _ratio_line(what: str, r: pd.Series) -> str:
+    """One finding: the nu = 0.4999 over nu = 0.3 ratios ``r`` by level, and whether they are within 2x."""
+    return (f"- {what}, levels {', '.join(str(int(x)) for x in r.index)}: {', '.join(f'{v:.2f}' for v in r)}"
+            + (" (within 2x)" if r.max() <= 2 else " (not within 2x)") + ".")
 
 
 def _curved_findings(d: pd.DataFrame, setup: Setup) -> list[str]:
