@@ -217,24 +217,26 @@ def triangle_elements(X: np.ndarray, C: np.ndarray, F: np.ndarray,
     return Condensed(S=S, R=R, Kii=np.zeros((0, 8, 8))), Fb, ui
 
 
-def slab_elements(pieces, layout: P2Layout, C: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Stiffness ``(n_s, 6, 6)`` and body-force load ``(n_s, 6)`` of every slab on the dofs of its
-    trace's nodes (left, middle, right): ``v(x, y) = w(x)``, strain ``(w_x', 0, w_y')``, integrated
-    by :data:`SLAB_GAUSS` Gauss points in x times the slab's height."""
+def slab_elements(pieces, layout: P2Layout, C: np.ndarray, F: np.ndarray,
+                  sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness ``(m, 6, 6)`` and body-force load ``(m, 6)`` of the slabs ``sel`` (a mask) on the dofs
+    of their trace's nodes (left, middle, right): ``v(x, y) = w(x)``, strain ``(w_x', 0, w_y')``,
+    integrated by :data:`SLAB_GAUSS` Gauss points in x times the slab's height (``C``, ``F`` per slab)."""
     s = pieces.slabs
+    k = np.flatnonzero(sel)
     u, w = gauss01(SLAB_GAUSS)
-    x = s.xl[:, None] + u[None, :] * (s.xr - s.xl)[:, None]
-    idx = np.repeat(np.arange(len(s)), SLAB_GAUSS)
+    x = s.xl[k, None] + u[None, :] * (s.xr - s.xl)[k, None]
+    idx = np.repeat(k, SLAB_GAUSS)
     h = (slab_bound(s, pieces.faces, x.ravel(), idx, "hi") - slab_bound(s, pieces.faces, x.ravel(), idx, "lo"))
-    wh = w[None, :] * (s.xr - s.xl)[:, None] * h.reshape(x.shape)
-    dx = layout.slab_x[:, 1] - layout.slab_x[:, 0]
-    N, dN = trace_shapes((x - layout.slab_x[:, :1]) / dx[:, None])
+    wh = w[None, :] * (s.xr - s.xl)[k, None] * h.reshape(x.shape)
+    dx = layout.slab_x[k, 1] - layout.slab_x[k, 0]
+    N, dN = trace_shapes((x - layout.slab_x[k, :1]) / dx[:, None])
     dN = dN / dx[:, None, None]
     B = np.zeros(x.shape + (3, 6))
     B[..., 0, 0::2] = dN
     B[..., 2, 1::2] = dN
-    K = np.einsum("sq,sqai,sab,sqbj->sij", wh, B, C, B)
-    load = np.einsum("sq,sqa,sc->sac", wh, N, F).reshape(-1, 6)
+    K = np.einsum("sq,sqai,sab,sqbj->sij", wh, B, C[k], B)
+    load = np.einsum("sq,sqa,sc->sac", wh, N, F[k]).reshape(-1, 6)
     return K, load
 
 
@@ -273,8 +275,10 @@ def assemble_p2_system(system: System) -> P2System:
     segments = segment_elements(pieces, lay, X, stiff[body_t], force[body_t])
     cond, Fb, ui = triangle_elements(X, stiff[body_t], force[body_t], segments)
     sb = pieces.slabs.body.astype(int)
-    Ks, Fs = slab_elements(pieces, lay, stiff[sb], force[sb])
-    Ks[lay.slab_tri >= 0], Fs[lay.slab_tri >= 0] = 0.0, 0.0  # in their elements' matrices
+    trace = lay.slab_tri < 0  # the others are in their elements' matrices
+    Ks, Fs = np.zeros((len(sb), 6, 6)), np.zeros((len(sb), 6))
+    if trace.any():
+        Ks[trace], Fs[trace] = slab_elements(pieces, lay, stiff[sb], force[sb], trace)
     sdofs = (2 * lay.slab_nodes[:, :, None] + np.arange(2)).reshape(-1, 6)
     dofs = np.vstack([lay.dofs, np.hstack([sdofs, np.full((len(sdofs), 6), -1)])])
     kglob = np.zeros((len(dofs), 12, 12))
