@@ -27,6 +27,7 @@ from .errors import (
     SceneError,
     SolverError,
     TimeLimitError,
+    ToleranceError,
     TooLargeError,
     UnbalancedLoadError,
     UnknownSolverError,
@@ -83,5 +84,5 @@ __all__ = [
     "write_outputs",
     # errors
     "CvxdualError", "AccuracyError", "MeshError", "ModelError", "NoAdmissibleStressError", "OutputError", "SceneError",
-    "SolverError", "TimeLimitError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError",
+    "SolverError", "TimeLimitError", "ToleranceError", "TooLargeError", "UnbalancedLoadError", "UnknownSolverError",
 ]

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .convex.solvers import LARGE_QP
-from .errors import CvxdualError
+from .errors import CvxdualError, ToleranceError
 from .progress import check_time_limit, log, phase
 from .validate import one_line
 
@@ -39,7 +39,9 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
     L, S = sol.scene.units
     c, r, t = s["contact"], s["residuals"], s["timings"]
     lines = [
-        f"scene {s['scene']}, {s['triangulation']}, level {s['level']}: {s['n_pieces']} pieces, "
+        f"scene {s['scene']}, {s['triangulation']}, "
+        + (f"level {s['level']}" if sol.adaptive is None else f"adaptive, cycle {sol.adaptive.chosen}")
+        + f": {s['n_pieces']} pieces, "
         f"{s['n_stress_unknowns']} stress unknowns, {s['n_dofs']} dofs, {s['n_contact_pairs']} contact pairs",
         f"solver {s['solver']}: {s['status']}, iterations {s['iterations']}; time {t['total']:.2f} s "
         f"(mesh {t['mesh']:.2f}, assemble {t['assemble']:.2f}, build {t['build']:.2f}, "
@@ -80,6 +82,12 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
                      + ("" if b["error_bound_rel"] is None else f" ({b['error_bound_rel']:.3%} of the stress's energy "
                         f"norm, {b['kinematic'].upper()} displacement)")
                      + ("" if b["guaranteed"] else f" (not guaranteed: {'; '.join(b['reasons'])})"))
+    if sol.adaptive is not None:
+        h = sol.adaptive
+        state = "met" if h.met else f"not met, stopped: {h.stop.replace('_', ' ')}"
+        lines.append(f"adaptive: {len(h.cycles)} cycles to a certified {100 * h.tol:.3g} % ({state}); this is cycle "
+                     f"{h.chosen}: {h.cycles[h.chosen].pieces} pieces, {100 * h.cycles[h.chosen].bound_rel:.3g} %; "
+                     f"{h.cycles[-1].elapsed:.2f} s in all")
     if written:
         took = "" if t_write is None else f" in {t_write:.2f} s"
         lines.append(f"wrote {Path(written[0]).parent}/{took}: " + ", ".join(Path(w).name for w in written))
@@ -104,8 +112,12 @@ def _cmd_solve(args) -> int:
     from .validate import file_stem
 
     plots = parse_plots(args.plots)  # an unknown figure name: one error line before any work
-    if names_plot(args.plots, Plot.BOUNDS) and not (args.bounds or space_of(args.stress_space).certifies):
+    stress_space = args.stress_space or ("eq" if args.tol is not None else "p0")
+    if names_plot(args.plots, Plot.BOUNDS) and not (args.bounds or args.tol is not None
+                                                     or space_of(stress_space).certifies):
         raise CvxdualError("--plots bounds needs certified bounds: add --bounds or --stress-space eq")
+    if names_plot(args.plots, Plot.CYCLES) and args.tol is None:
+        raise CvxdualError("--plots cycles draws a run to a tolerance: add --tol")
     time_limit = check_time_limit(args.time_limit)
     # the hard stop covers reading the scene too (bounded work: a .geo file is read, never run)
     hard_stop = _hard_stop(time_limit if args.own_process else None, fast=str(args.solver).upper() == "FAST")
@@ -118,8 +130,13 @@ def _cmd_solve(args) -> int:
             # fail before the work, and create nothing until there are results; but free the space of
             # killed runs' leftovers now, not after a solve that may take minutes
             sweep_leftovers(check_output_dir(out))
-        sol = solve(scene, args.triangulation, args.level, solver, stress_space=args.stress_space, bounds=args.bounds,
-                    max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose, kinematic=args.kinematic)
+        unmet = None
+        try:
+            sol = solve(scene, args.triangulation, args.level, solver, stress_space=stress_space, bounds=args.bounds,
+                        max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose,
+                        kinematic=args.kinematic, tol=args.tol, max_pieces=args.max_pieces)
+        except ToleranceError as e:  # the tolerance was not met: its best certified result is written
+            sol, unmet = e.solution, e
     written, t_write = [], None
     if out is not None:
         with phase("write", start=f"outputs to {out}/" if plots else None) as p:
@@ -127,6 +144,8 @@ def _cmd_solve(args) -> int:
             p.detail = f"{len(written)} files"
         t_write = p.seconds
     print(human_summary(sol, written, t_write))
+    if unmet is not None:
+        raise unmet
     return 0
 
 
@@ -195,13 +214,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scene", default="hertz", help="built-in scene name or path to a .toml file (default: hertz)")
     s.add_argument("--triangulation", default="type1", help="type1 (Haslinger-Hlavacek) or type2 "
                    "(Hlavacek-Krizek) (default: type1)")
-    s.add_argument("--level", type=int, default=None, help="mesh level, h halves per level (default: the scene's)")
+    s.add_argument("--level", type=int, default=None, help="mesh level, h halves per level (default: the scene's); "
+                   "with --tol the first cycle's (default: the lowest the scene meshes at)")
+    s.add_argument("--tol", default=None, metavar="TOL",
+                   help="solve to a certified relative energy error, e.g. 1%% or 0.01: refine where the bound's "
+                   "contributions are, cycle by cycle, until it holds (docs/adaptive.md); implies --stress-space eq "
+                   "unless p0 is named (then p0 certified by --bounds)")
+    s.add_argument("--max-pieces", type=int, default=None, metavar="N",
+                   help="with --tol: stop before a cycle with more pieces (default: 400000); the best certified "
+                   "result is written and the exit status is 1")
     s.add_argument("--solver", default=None, help="a CVXPY solver name, or fast: the active-set path (default: "
                    f"the CVXPY solver measured fastest at the mesh's size, CLARABEL below {LARGE_QP:.0e} pieces and "
                    "SCS above, Clarabel taking over where SCS fails; with --stress-space eq the fast path)")
-    s.add_argument("--stress-space", default="p0", choices=("p0", "eq"),
+    s.add_argument("--stress-space", default=None, choices=("p0", "eq"),
                    help="p0: the paper's piecewise-constant stresses; eq: exactly admissible equilibrium "
-                   "stresses with certified bounds, frictionless (default: p0)")
+                   "stresses with certified bounds, frictionless (default: p0, with --tol eq)")
     s.add_argument("--bounds", action="store_true", help="with p0: also certify the displacement against "
                    "equilibrium stresses on the same mesh")
     s.add_argument("--kinematic", default="p2", choices=("p1", "p2"),
@@ -221,8 +248,9 @@ def build_parser() -> argparse.ArgumentParser:
                       "iterations, on stderr")
     from .outputs.figures import plot_names  # no matplotlib: that loads only to draw
     s.add_argument("--plots", nargs="?", const=True, default=None, metavar="NAMES",
-                   help="also draw figures: alone, the default set (stress, deformed, pressure, and bounds where "
-                   f"computed); or comma-separated names from {plot_names()}, or all (each NAME.png); "
+                   help="also draw figures: alone, the default set (stress, deformed, pressure, bounds where "
+                   f"computed, cycles with --tol); or comma-separated names from {plot_names()}, or all (each "
+                   "NAME.png); "
                    "matplotlib's import and drawing cost more than a whole small run (default: --no-plots)")
     s.add_argument("--no-plots", dest="plots", action="store_const", const=None, help="draw no figures (the default)")
     s.add_argument("--no-output", action="store_true", help="print the summary only, write nothing")

@@ -70,3 +70,12 @@ class AccuracyError(CvxdualError):
 
 class TooLargeError(CvxdualError):
     """The run would need more memory than the limit allows (estimated before allocating)."""
+
+
+class ToleranceError(CvxdualError):
+    """A run to a certified tolerance stopped before meeting it (pieces, time or memory ran out);
+    ``solution`` is its best certified result (the CLI writes it before it exits with status 1)."""
+
+    def __init__(self, message: str = "", cli: str | None = None, solution=None):
+        super().__init__(message, cli=cli)
+        self.solution = solution

@@ -49,3 +49,13 @@ class Kinematic(StrEnum):
         except ValueError:
             raise CvxdualError(f"unknown kinematic side {str(name)[:40]!r}; choose 'p1' or 'p2'",
                                cli=f"unknown --kinematic {str(name)[:40]!r}; choose p1 or p2") from None
+
+
+class Stop(StrEnum):
+    """Why a run to a tolerance stopped (:mod:`cvxdual.adapt`): the tolerance met, or what came first."""
+
+    TOLERANCE = "tolerance"
+    MAX_PIECES = "max_pieces"
+    MEMORY = "memory"
+    TIME_LIMIT = "time_limit"
+    NO_REFINEMENT = "no_refinement"

@@ -24,12 +24,12 @@ from .kinds import Space
 from .p0.run import P0Stresses  # at import: SciPy's sparse solvers load with cvxdual, not in a solve
 from .progress import Deadline, phase
 from .scene import Scene
-from .sizing import check_size
+from .sizing import check_mesh_size, check_size
 from .solution import Solution
 from .system.assembly import System, assemble
 from .system.kinematic import kinematic_side
 from .system.stress_space import StressSpace
-from .validate import one_line, short
+from .validate import integer, one_line, short
 
 log = logging.getLogger(__name__)
 
@@ -74,9 +74,9 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
 
 
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
-          check: bool = True, warm_start: bool = True, stress_space: str = "p0", bounds: bool = False,
+          check: bool = True, warm_start: bool = True, stress_space: str | None = None, bounds: bool = False,
           max_memory=None, fallback: bool = True, time_limit: float | None = None, verbose: bool = False,
-          kinematic: str = "p2", **solver_options) -> Solution:
+          kinematic: str = "p2", tol=None, max_pieces: int | None = None, **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.activeset`
@@ -85,7 +85,7 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     (:func:`cvxdual.convex.solvers.default_solver`: Clarabel, SCS from 2e4 pieces; for
     ``stress_space="eq"`` the fast route), handing over to Clarabel where it fails; options alone
     go to Clarabel.
-    ``stress_space`` is ``"p0"`` (the paper's) or ``"eq"`` (exactly admissible equilibrium
+    ``stress_space`` is ``"p0"`` (the paper's; the default) or ``"eq"`` (exactly admissible equilibrium
     stresses, column stresses on curved pieces, with certified bounds; docs/equilibrium.md). ``bounds`` also
     certifies a ``p0`` run (its displacement against the equilibrium stresses of the same mesh).
     ``kinematic`` is the displacement the bounds' upper side uses: ``"p2"`` (continuous P2 on the
@@ -102,12 +102,26 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     stops with :class:`~cvxdual.errors.TimeLimitError`. ``verbose`` prints the CVXPY solver's
     own log. Progress is logged to the logger ``"cvxdual"`` (INFO; the fast path's iterations
     at DEBUG).
+    ``tol`` (``0.01`` or ``"1%"``) solves to a certified tolerance instead of at one level
+    (:mod:`cvxdual.adapt`, docs/adaptive.md): cycles of solve, certify, mark and refine from a coarse
+    mesh (``level``, if given, is the first cycle's) until the certified relative energy error is at
+    most ``tol``; the solution's ``adaptive`` holds every cycle. Where ``max_pieces`` (default
+    400000), the memory or ``time_limit`` stop it first,
+    :class:`~cvxdual.errors.ToleranceError` is raised with the best certified solution as its
+    ``solution``.
     """
     deadline = Deadline(time_limit)
     deadline.fast = str(solver).upper() == FAST  # the advice of a time-out before the solver is resolved
+    if tol is not None:
+        with deadline.enforced():
+            return _solve_to(deadline, scene, triangulation, level, solver, stress_space or Space.EQ, max_memory,
+                             kinematic, tol, max_pieces, warm_start)
+    if max_pieces is not None:
+        raise CvxdualError("max_pieces bounds a run to a tolerance: give tol too, or drop it",
+                           cli="--max-pieces bounds a run to a tolerance: give --tol too, or drop it")
     with deadline.enforced():  # from the start: the size probe's meshes count too
-        return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds,
-                      max_memory, fallback, verbose, kinematic, solver_options)
+        return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space or Space.P0,
+                      bounds, max_memory, fallback, verbose, kinematic, solver_options)
 
 
 def _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space, bounds, max_memory,
@@ -171,6 +185,44 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
                             cli=f"{what}; lower --level or free memory") from None
 
 
+def _solve_to(deadline, scene, triangulation, level, solver, stress_space, max_memory, kinematic, tol, max_pieces,
+              warm_start) -> Solution:
+    """A run to the certified tolerance ``tol`` (:func:`~cvxdual.adapt.cycles.refine_to_tolerance`)."""
+    from .adapt.cycles import MAX_PIECES, Plan, refine_to_tolerance
+    from .adapt.marking import parse_tolerance
+    from .adapt.outline_view import outline_scene
+
+    scene = outline_scene(as_scene(scene))  # local refinement: every body meshed by its outline
+    gmsh0 = gmsh_seconds()
+    triangulation = check_triangulation(triangulation)
+    space = space_of(stress_space, kinematic)
+    plan = Plan(tol=parse_tolerance(tol), max_pieces=_max_pieces(MAX_PIECES if max_pieces is None else max_pieces),
+                level=None if level is None else check_level(level))
+    if scene.friction is not None:
+        raise CvxdualError("a run to a tolerance is certified, and the bounds are frictionless; drop the scene's "
+                           "friction or solve at a level without tol",
+                           cli="--tol is certified, and the bounds are frictionless; drop the scene's friction or "
+                               "solve at a --level without --tol")
+    solver = resolve_solver(FAST if solver is None else solver)
+    deadline.fast = solver == FAST
+    if plan.level is not None:
+        check_size(scene, plan.level, solver == FAST, space.name, True, max_memory, kinematic)
+    certify = (lambda sol: sol) if space.certifies else partial(_bounds_of, kinematic=kinematic, deadline=deadline)
+    sol = refine_to_tolerance(
+        lambda grid: space.run(scene, triangulation, grid, solver, warm_start=warm_start, deadline=deadline),
+        certify, scene, triangulation, plan, deadline,
+        partial(check_mesh_size, fast=solver == FAST, stress_space=space.name, bounds=True, kinematic=kinematic,
+                max_memory=max_memory))
+    return _gmsh_timed(sol, scene, gmsh0)
+
+
+def _max_pieces(value) -> int:
+    try:
+        return integer(value, "max_pieces", minimum=1)
+    except SceneError as e:  # not the scene's: a plain CvxdualError, named as the caller gave it
+        raise CvxdualError(str(e), cli=str(e).replace("max_pieces", "--max-pieces", 1)) from None
+
+
 def _gmsh_timed(sol: Solution, scene: Scene, before: float) -> Solution:
     """``sol`` with ``timings["gmsh"]`` when the scene has outline bodies: gmsh's wall time in the
     whole call (the size probe and the warm start's coarse meshes too; it overlaps the phases)."""
@@ -183,9 +235,13 @@ def _attempt(scene: Scene, triangulation: str, level: int, space: StressSpace, b
              solver: str, **options) -> Solution:
     """One run with ``solver`` in ``space``, and bounds where asked for and the space gives none."""
     sol = space.run(scene, triangulation, level, solver, **options)
-    if bounds and not space.certifies:
-        with phase("bounds", options.get("deadline")) as p:
-            sol = space_of(Space.EQ, kinematic).certify(sol)
-            side = kinematic_side(kinematic).name.upper()
-            p.detail = f"the {side} displacement against the equilibrium stresses of the same mesh"
+    return _bounds_of(sol, kinematic, options.get("deadline")) if bounds and not space.certifies else sol
+
+
+def _bounds_of(sol: Solution, kinematic: str, deadline) -> Solution:
+    """``sol`` (a P0 run) certified against the equilibrium stresses of its mesh (phase ``bounds``)."""
+    with phase("bounds", deadline) as p:
+        sol = space_of(Space.EQ, kinematic).certify(sol)
+        side = kinematic_side(kinematic).name.upper()
+        p.detail = f"the {side} displacement against the equilibrium stresses of the same mesh"
     return sol

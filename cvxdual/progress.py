@@ -107,6 +107,15 @@ class Deadline:
             _ACTIVE.reset(token)
 
     @contextmanager
+    def caught(self):
+        """Inside :meth:`enforced`: the alarm at the deadline raises :meth:`error` here, where the
+        caller can keep what it has (a run to a tolerance keeps its best cycle)."""
+        try:
+            yield self
+        except _Alarm:
+            raise self.error() from None
+
+    @contextmanager
     def _alarm(self):
         usable = (self.seconds is not None and hasattr(signal, "setitimer")
                   and threading.current_thread() is threading.main_thread()

@@ -275,3 +275,42 @@ class Bounds(Record):
     reasons: tuple[str, ...]
     kinematic: str = "p1"
     error_bound_rel: float | None = None
+
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class Cycle(Record):
+    """One cycle of a run to a certified tolerance (:mod:`cvxdual.adapt`): its mesh (``pieces``,
+    ``triangles``, ``columns``), its certificate (``energy_lower``, ``energy_upper``, ``bound_rel``,
+    ``sqrt(2 G)`` relative to the stress's energy norm, ``guaranteed``), the share of ``G`` the
+    marking chose for refinement (``None`` on the last cycle), and seconds: the cycle's own and
+    since the run's start."""
+
+    cycle: int
+    pieces: int
+    triangles: int
+    columns: int
+    energy_lower: float
+    energy_upper: float
+    bound_rel: float
+    guaranteed: bool
+    marked_share: float | None
+    seconds: float
+    elapsed: float
+
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class AdaptiveHistory(Record):
+    """A run to a certified tolerance: the ``tol`` asked, the Dorfler fraction ``theta``, whether the
+    tolerance was ``met``, why the run stopped (``stop``: ``"tolerance"``, ``"max_pieces"``,
+    ``"time_limit"``, ``"memory"``, ``"no_refinement"``), the cycle the solution is (``chosen``: the
+    last where the tolerance was met, else the best) and every cycle (:class:`Cycle`)."""
+
+    tol: float
+    theta: float
+    met: bool
+    stop: str  # a cvxdual.kinds.Stop (a str: records import nothing of the package)
+    chosen: int
+    cycles: tuple
+
+    def as_dict(self) -> dict:
+        return {**{k: v for k, v in self.items() if k != "cycles"}, "cycles": [c.as_dict() for c in self.cycles]}

@@ -63,14 +63,38 @@ def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bo
              kinematic: str = "p2") -> Estimate:
     """Estimated triangles, nodes and peak memory of solving ``scene`` at ``level``."""
     n = mesh_size(scene, level, column_breaks(scene))
+    cost = sum(BYTES_PER_TRIANGLE[r] for r in _rows(stress_space, fast, bounds, kinematic))
+    return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
+
+
+def _rows(stress_space, fast: bool, bounds: bool, kinematic) -> tuple[str, ...]:
+    """The rows of :data:`BYTES_PER_TRIANGLE` a run adds up."""
     space = Space.parse(stress_space)
     rows = RUN_ROWS[space, bool(fast)]
     if bounds and space is Space.P0:  # bounds of a P0 run: the equilibrium stresses by the fast route
         rows += ("eq",)
     if (bounds or space is Space.EQ) and Kinematic.parse(kinematic) is Kinematic.P2:
         rows += ("p2",)
-    cost = sum(BYTES_PER_TRIANGLE[r] for r in rows)
-    return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
+    return rows
+
+
+def memory_limit(max_memory=None) -> tuple[float, object]:
+    """The limit in bytes and what gave it (``max_memory``, else ``$CVXDUAL_MAX_MEMORY``; ``None``:
+    neither, the memory available)."""
+    given = max_memory if max_memory is not None else os.environ.get(ENV)
+    return (parse_size(given) if given is not None else available_memory()), given
+
+
+def check_mesh_size(n_triangles: float, fast: bool, stress_space: str, bounds: bool, kinematic: str,
+                    max_memory=None) -> Estimate:
+    """The estimate of a run on a mesh of ``n_triangles`` (an adaptive cycle's, counted from its grid),
+    or :class:`~cvxdual.errors.TooLargeError` above the limit."""
+    cost = sum(BYTES_PER_TRIANGLE[r] for r in _rows(stress_space, fast, bounds, kinematic))
+    est = Estimate(n_triangles, 0.5 * n_triangles, BASE_BYTES + cost * n_triangles)
+    limit = memory_limit(max_memory)[0]
+    if est.bytes > limit:
+        raise TooLargeError(f"a mesh of {est.describe()} is more than the memory limit ({_bytes(limit)})")
+    return est
 
 
 def parse_size(value) -> float:
@@ -94,8 +118,7 @@ def check_size(scene, level: int, fast: bool, stress_space: str = "p0", bounds: 
                max_memory=None, kinematic: str = "p2") -> Estimate:
     """The :func:`estimate`, or :class:`~cvxdual.errors.TooLargeError` if it exceeds the limit."""
     est = estimate(scene, level, fast, stress_space, bounds, kinematic)
-    given = max_memory if max_memory is not None else os.environ.get(ENV)
-    limit = parse_size(given) if given is not None else available_memory()
+    limit, given = memory_limit(max_memory)
     if est.bytes > limit:
         where = "the given limit" if given is not None else "the memory available"
         what = f"{short(scene.name, 40)} at level {level}: {est.describe()}, more than {where} ({_bytes(limit)})"

@@ -144,6 +144,7 @@ class Solution:
     # the checks applied ({name: residual}) and skipped ({name: reason}); None: all of tolerances()
     checks: dict | None = None
     space: object | None = None  # the EquilibriumSpace of an "eq" solution or of the bounds
+    adaptive: object | None = None  # a run to a tolerance: its AdaptiveHistory (cvxdual.adapt)
 
     @property
     def stress_space(self) -> Space:
@@ -251,6 +252,7 @@ class Solution:
             "bounds": None if self.bounds is None else {k: self.bounds[k] for k in BOUND_KEYS},
             "checks_skipped": {} if self.checks is None else dict(self.checks["skipped"]),
             "timings": dict(self.timings),
+            **({} if self.adaptive is None else {"adaptive": self.adaptive.as_dict()}),
         }
 
 

@@ -57,7 +57,7 @@ def load_example(name: str):
     return module
 
 
-PROGRESS = ("mesh", "assemble", "build", "solve", "recover", "bounds", "write")  # the phases of cvxdual.progress
+PROGRESS = ("mesh", "assemble", "build", "solve", "recover", "bounds", "refine", "write")  # the phases of cvxdual.progress
 
 
 def without_progress(err: str) -> list[str]:

@@ -16,7 +16,7 @@ PKG = ROOT / "cvxdual"
 # Layers, lowest first. A unit (a subpackage, or a top-level module) may import units of lower
 # layers and its own modules, never a unit of its own layer or above. This is the data flow:
 # scene -> reference -> geometry -> linalg -> solution -> convex/activeset -> system -> p0 | eq ->
-# pipeline -> outputs -> study -> cli. The two stress spaces share one layer: neither imports the other.
+# adapt -> pipeline -> outputs -> study -> cli. The two stress spaces share one layer: neither imports the other.
 LAYERS = [
     {"errors"},
     {"validate", "voigt", "kinds", "records"},  # names of kinds; typed records (no package imports)
@@ -29,6 +29,7 @@ LAYERS = [
     {"convex", "activeset"},  # the CVXPY layer and the active-set core, over no stress space
     {"system"},  # the discrete system both spaces share: supports, loads, rigid motions, assembly, P1 displacement
     {"p0", "eq"},  # the two stress spaces, siblings: the paper's P0 and the equilibrium space
+    {"adapt"},  # runs to a certified tolerance: marking, grids refined, the cycles
     {"pipeline"},  # the entry points
     {"outputs"},
     {"study"},

@@ -467,7 +467,7 @@ def test_unknown_figure_name_is_one_error_line_and_nothing_written(tmp_path, cap
     from cvxdual.outputs.figures import Plot, parse_plots
     with pytest.raises(UnknownPlotError, match="valid names: stress, deformed, pressure, bounds, mesh, vonmises"):
         parse_plots("stress,strain")
-    assert parse_plots(True) == (Plot.STRESS, Plot.DEFORMED, Plot.PRESSURE, Plot.BOUNDS)
+    assert parse_plots(True) == (Plot.STRESS, Plot.DEFORMED, Plot.PRESSURE, Plot.BOUNDS, Plot.CYCLES)
     assert parse_plots(" Mesh,stress,mesh") == (Plot.MESH, Plot.STRESS)
     assert parse_plots(None) == parse_plots(False) == parse_plots(()) == ()
     with pytest.raises(UnknownPlotError, match="no figure named"):

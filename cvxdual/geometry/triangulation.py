@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import CvxdualError, MeshError, SceneError
 from ..scene.scene import Body, Scene
+from .grid import Grid
 from .mesh import Mesh, build_mesh, check_level, column_abscissae
 from .pieces import Pieces, Slabs, build_pieces
 
@@ -95,12 +96,17 @@ def tangent_vertices(face, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x, fa + da * (x - a)
 
 
-def discretize(scene: Scene, triangulation: str = "type1", level: int | None = None):
-    """Mesh and pieces of ``scene``: returns ``(mesh, pieces, ties)``; ``ties`` is ``(m, 2)``
+def discretize(scene: Scene, triangulation: str = "type1", level: int | Grid | None = None):
+    """Mesh and pieces of ``scene`` at a uniform ``level`` or on an adaptive
+    :class:`~cvxdual.geometry.grid.Grid`: returns ``(mesh, pieces, ties)``; ``ties`` is ``(m, 2)``
     node pairs ``(tied, master)`` or ``None``."""
     tri = check_triangulation(triangulation)
-    level = check_level(scene.mesh.default_level if level is None else level)
-    cols = column_abscissae(scene, level, column_breaks(scene))
+    grid = level if isinstance(level, Grid) else None
+    if grid is None:
+        level = check_level(scene.mesh.default_level if level is None else level)
+        cols = column_abscissae(scene, level, column_breaks(scene))
+    else:
+        level, cols = grid.level, grid.columns
     polygons: list[list] = [[], []]
     face_y = [None, None]
     if tri == "type2":
@@ -108,8 +114,13 @@ def discretize(scene: Scene, triangulation: str = "type1", level: int | None = N
         for k, body in enumerate(scene.bodies):
             if polygons[k]:
                 face_y[k] = _polygon_heights(body, polygons[k])
-    mesh = build_mesh(scene, level, columns=cols, face_y=face_y)
+    mesh = build_mesh(scene, level, columns=cols, face_y=face_y, spots=(None, None) if grid is None else grid.spots)
     return (mesh, *_pieces(mesh, tri, polygons))
+
+
+def uniform_grid(scene: Scene, level: int) -> Grid:
+    """The :class:`~cvxdual.geometry.grid.Grid` of the uniform ``level``: an adaptive run's start."""
+    return Grid.uniform(scene, check_level(level), column_abscissae(scene, level, column_breaks(scene)))
 
 
 def _tangent_polygons(scene: Scene, cols: np.ndarray):

@@ -271,3 +271,20 @@ def plot_bound_map(sol, ax=None, colorbar: bool = True, cax=None):
                            "neither", label=f"contribution to G per unit area [{S}]\nlog, top {decades:.2g} decades: "
                            f"{100 * share:.4g}% of the area's G")
     return ax
+
+
+def plot_cycles(history, ax=None, units=("L", "S")):
+    """A run to a tolerance (:class:`~cvxdual.records.AdaptiveHistory`): the certified relative
+    error of every cycle against its pieces (log-log), the tolerance, and the slope ``N^-1/2``
+    of uniform refinement on a smooth solution with P1 for comparison."""
+    ax = axes(ax)
+    n = np.array([c.pieces for c in history.cycles], float)
+    rel = np.array([c.bound_rel for c in history.cycles], float)
+    ax.loglog(n, 100 * rel, "o-", label="certified error, per cycle")
+    ax.axhline(100 * history.tol, color="0.4", ls="--", lw=1, label=f"tolerance {100 * history.tol:.3g} %")
+    if len(n) > 1:
+        ax.loglog(n, 100 * rel[0] * (n / n[0]) ** -0.5, ":", color="0.5", label="slope N^-1/2")
+    ax.set_xlabel("pieces N")
+    ax.set_ylabel("certified relative energy error [%]")
+    ax.legend(fontsize="small")
+    return ax

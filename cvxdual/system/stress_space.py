@@ -19,6 +19,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..convex.solvers import FAST
+from ..geometry.grid import Grid
 from ..geometry.triangulation import discretize
 from ..kinds import Space, Status
 from ..progress import Deadline, phase
@@ -51,15 +52,18 @@ class StressSpace(ABC):
     certifies: ClassVar[bool] = False
     frictional: ClassVar[bool] = False
 
-    def run(self, scene, triangulation: str, level: int, solver: str, check: bool = True, warm_start: bool = True,
-            deadline: Deadline | None = None, verbose: bool = False, **solver_options) -> Solution:
-        """Mesh, assemble, build, solve with ``solver`` (warm-started from level ``level - 2``
-        unless ``warm_start`` is false), recover and (unless ``check`` is false) check."""
+    def run(self, scene, triangulation: str, level: int | Grid, solver: str, check: bool = True,
+            warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
+            **solver_options) -> Solution:
+        """Mesh, assemble, build, solve with ``solver`` (warm-started from level ``level - 2``, or on an
+        adaptive :class:`~cvxdual.geometry.grid.Grid` from its last cycle, unless ``warm_start`` is
+        false), recover and (unless ``check`` is false) check."""
         deadline = deadline or Deadline()
         t0 = time.perf_counter()
         with phase("mesh", deadline) as p:
             mesh, pieces, ties = discretize(scene, triangulation, level)
-            p.detail = f"{triangulation}, level {level}: {len(mesh.points)} nodes, {len(pieces.kind)} pieces"
+            on = f"adaptive grid from level {mesh.level}" if isinstance(level, Grid) else f"level {level}"
+            p.detail = f"{triangulation}, {on}: {len(mesh.points)} nodes, {len(pieces.kind)} pieces"
         t1 = time.perf_counter()
         with phase("assemble", deadline) as p:
             system = assemble(mesh, pieces, ties)
@@ -76,7 +80,7 @@ class StressSpace(ABC):
         t3 = time.perf_counter()
         with phase("recover", deadline) as p:
             sol, t_error = (solved.solution, 0.0) if solved.solution is not None else \
-                self.recover(scene, triangulation, level, system, built, solved)
+                self.recover(scene, triangulation, system.mesh.level, system, built, solved)
             p.detail = self.recovered(sol)
         t4 = time.perf_counter()
         sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": solved.build_time,

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..activeset.core import coarse_start, transfer_active
 from ..errors import MeshError, SolverError
+from ..geometry.grid import Grid
 from ..geometry.triangulation import discretize
 from .assembly import assemble
 from .displacement import nothing_acts, solve_fast
@@ -20,12 +21,15 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def warm_start_pairs(scene: Scene, triangulation: str, level: int, pair_x: np.ndarray) -> np.ndarray | None:
+def warm_start_pairs(scene: Scene, triangulation: str, level: int | Grid, pair_x: np.ndarray) -> np.ndarray | None:
     """Initial active set for ``level`` at the pair abscissae ``pair_x``: the converged set of
     level ``level - 2`` (:func:`~cvxdual.activeset.core.coarse_start`), transferred; ``None`` below
     level 2. A coarse level that the fast path cannot solve, or where nothing acts, gives no
     hint: the next level starts cold; so does one that cannot be meshed (an outline's strip is
-    deepest there)."""
+    deepest there). An adaptive :class:`~cvxdual.geometry.grid.Grid` starts from its last
+    cycle's set (cold on the first)."""
+    if isinstance(level, Grid):
+        return None if level.start is None else transfer_active(*level.start, pair_x)
     def solve_at(lv: int, coarser):
         log.debug("warm start: the active set of level %d", lv)
         try:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .sizes import STRIP_ASPECT, SizeField, arc_edges, arc_size, graded_stops, strip_depth
+from .sizes import STRIP_ASPECT, SizeField, arc_size, graded_stops, spot_edges, strip_depth
 
 SPLINE_SAMPLES = 256  # points a stretch of a spline is sampled at before thinning to the sizes
 
@@ -29,18 +29,22 @@ class OutlineBuild:
     ``level``, as it is built. ``halved``: gmsh meshes at the sizes of ``level - 1`` through every
     other chain node (``step`` 2, ``glevel`` the level gmsh's sizes are of), to be refined once."""
 
-    def __init__(self, gmsh, body, columns, inner_y, level: int, halved: bool = True):
+    def __init__(self, gmsh, body, columns, inner_y, level: int, halved: bool = True, spots=None):
         self.gmsh, self.geo = gmsh, gmsh.model.geo
         gmsh.model.add(body.name)
         self.body, self.columns, self.inner_y, self.level = body, columns, inner_y, level
         self.nc = len(columns)
         self.face_y = body.face.value(columns)
         self.chain = np.stack([columns, inner_y], 1)
+        # halved through every other chain node needs both ends among them: an odd node count (every
+        # uniform level from 1 has one; an adaptive grid's may not, and is meshed at its own sizes)
+        halved = halved and (len(columns) - 1) % 2 == 0 and spots is None
+        self.spots = spots  # an adaptive run's sizes (x, y, size), or None
         self.step, self.glevel = (2, level - 1) if level >= 1 and halved else (1, level)
         cols = columns[::self.step]
         self.w = strip_depth(cols) / STRIP_ASPECT  # the chain points' sizes
         self.side = strip_depth(columns)  # the strip's sides are kept whole: their ends get their length as size
-        self.field = SizeField.of(body, cols, inner_y[::self.step], self.glevel)
+        self.field = SizeField.of(body, cols, inner_y[::self.step], self.glevel, spots)
         self.fine = SizeField.of(body, columns, inner_y, level) if self.step > 1 else self.field
         self.ends = {"right": (body.x_range[1], float(self.face_y[-1])),
                      "left": (body.x_range[0], float(self.face_y[0]))}
@@ -118,7 +122,7 @@ class OutlineBuild:
         step, virtual = self.step, self.virtual
         a0, sweep = s.angles()
         r = math.dist(s.start, s.center)
-        n = arc_edges(s, self.level)
+        n = spot_edges(s, self.level, self.spots)
         d = sweep / n
         t = a0 + d * np.arange(n + 1)
         c = np.array(s.center)

@@ -42,14 +42,15 @@ def mesh_threads() -> int:
     return max(1, min(2, int(limit) if limit.isdigit() else (os.cpu_count() or 1)))
 
 
-def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
+def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None) -> RestMesh:
     """Mesh the body between the strip's inner chain ``(columns, inner_y)`` and its outline.
 
     The last eight meshes are kept (read-only arrays): the size estimate meshes a small level in
     full (:func:`cvxdual.geometry.mesh.mesh_size`) and the fast path's warm start meshes coarse
     levels; a run of two bodies meets each of them again."""
     columns, inner_y = np.asarray(columns, float), np.asarray(inner_y, float)
-    return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level))
+    spots = None if spots is None or not len(spots) else np.ascontiguousarray(spots, float).reshape(-1, 3).tobytes()
+    return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level), spots)
 
 
 def forget_meshes() -> None:
@@ -67,11 +68,12 @@ def gmsh_seconds() -> float:
 
 
 @lru_cache(maxsize=8)
-def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
+def _cached(body, columns: bytes, inner_y: bytes, level: int, spots: bytes | None = None) -> RestMesh:
     t = time.perf_counter()
     try:
         rest = in_gmsh("cvxdual.geometry.outline.mesher:gmsh_mesh", body, np.frombuffer(columns),
-                       np.frombuffer(inner_y), level, what=f"meshing body {body.name!r} at level {level}")
+                       np.frombuffer(inner_y), level, None if spots is None else np.frombuffer(spots).reshape(-1, 3),
+                       what=f"meshing body {body.name!r} at level {level}")
     finally:
         _SPENT[0] += time.perf_counter() - t
     for a in (rest.points, rest.triangles, rest.virtual_nodes, rest.virtual_weight, rest.virtual_arc,
@@ -80,13 +82,13 @@ def _cached(body, columns: bytes, inner_y: bytes, level: int) -> RestMesh:
     return rest
 
 
-def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> RestMesh:
+def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None) -> RestMesh:
     """:func:`mesh_rest`'s work, done by gmsh: runs in gmsh's own process (:mod:`~cvxdual.geometry.outline.fence`)."""
     gmsh = import_gmsh()
     gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
-        return mesh_body(gmsh, body, columns, inner_y, level)
+        return mesh_body(gmsh, body, columns, inner_y, level, spots=spots)
     except MeshError:
         raise
     except Exception as e:  # gmsh reports its failures as plain exceptions
@@ -96,12 +98,12 @@ def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> Res
         gmsh.finalize()
 
 
-def mesh_body(gmsh, body, columns, inner_y, level, halved=True) -> RestMesh:
+def mesh_body(gmsh, body, columns, inner_y, level, halved=True, spots=None) -> RestMesh:
     """The body's mesh beyond the strip's inner chain ``(columns, inner_y)``. ``halved``: at level
     ``L >= 1`` gmsh meshes at the sizes of level ``L - 1`` and the mesh is refined once; where
     that cannot keep level ``L``'s polygons (they clash as gmsh gets them, or a fine node folds a
     triangle) the body is meshed again at level ``L``'s own sizes."""
-    build = OutlineBuild(gmsh, body, columns, inner_y, level, halved)
+    build = OutlineBuild(gmsh, body, columns, inner_y, level, halved, spots)
     check_strip(body, build.chain)
     add_loops(build)
     if not polygons_clear(build):
@@ -121,7 +123,8 @@ def mesh_body(gmsh, body, columns, inner_y, level, halved=True) -> RestMesh:
 
 def _unhalved(build: OutlineBuild) -> RestMesh:
     build.gmsh.model.remove()
-    return mesh_body(build.gmsh, build.body, build.columns, build.inner_y, build.level, halved=False)
+    return mesh_body(build.gmsh, build.body, build.columns, build.inner_y, build.level, halved=False,
+                     spots=build.spots)
 
 
 def add_surfaces(build: OutlineBuild, regions: list) -> list[int]:
@@ -137,7 +140,7 @@ def set_sizes(build: OutlineBuild, regions: list, surfaces: list[int]) -> None:
     geo, shape = build.geo, build.shape
     steer = steering(build.body, build.field, build.glevel,
                      [(build.ring(outer), [build.ring(cs) for cs in inner]) for outer, inner in regions],
-                     np.concatenate([np.stack([p[:-1], p[1:]], 1) for p, _ in shape.values()]))
+                     np.concatenate([np.stack([p[:-1], p[1:]], 1) for p, _ in shape.values()]), build.spots)
     embedded = [[build.point(q, float(lc)) for q, lc in zip(pts, lcs, strict=True)] for pts, lcs in steer]
     for tag, lc in build.sizes.items():
         geo.mesh.setSize([(0, tag)], lc)

@@ -48,6 +48,20 @@ def arc_edges(seg, level: int) -> int:
     return max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES - 1e-9)) * 2**level
 
 
+def spot_edges(seg, level: int, spots) -> int:
+    """Edges of a free arc's polygon: :func:`arc_edges`, or more where an adaptive run's ``spots``
+    (``x, y, size``) ask smaller sizes on the arc (equal edges, none longer than the least asked)."""
+    n = arc_edges(seg, level)
+    if spots is None or not len(spots):
+        return n
+    q = seg.sample(max(64, n))
+    d = np.hypot(q[:, None, 0] - spots[None, :, 0], q[:, None, 1] - spots[None, :, 1])
+    s = spots[None, :, 2]
+    least = float(np.min(s + GROWTH / 2**level * np.maximum(d - s, 0.0)))
+    length = math.dist(seg.start, seg.center) * abs(seg.angles()[1])
+    return max(n, math.ceil(length / least - 1e-9))
+
+
 @dataclass(frozen=True)
 class SizeField:
     """The element size asked at points of an outline body: the smallest of
@@ -63,9 +77,14 @@ class SizeField:
     growth: float
 
     @classmethod
-    def of(cls, body, columns: np.ndarray, inner_y: np.ndarray, level: int) -> SizeField:
+    def of(cls, body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None) -> SizeField:
+        """The field of the strip's chain and the arcs at ``level``, and of the ``spots`` ``(m, 3)``
+        (``x, y, size``: an adaptive run's sizes asked where its certificate was large)."""
         w = strip_depth(columns) / STRIP_ASPECT
         src, size = [np.stack([columns, inner_y], 1)], [w]
+        if spots is not None and len(spots):
+            src.append(spots[:, :2])
+            size.append(spots[:, 2])
         for seg in arcs(body):  # a source at every vertex of the arc's polygon
             q = seg.sample(arc_edges(seg, level))
             src.append(q)
@@ -112,11 +131,12 @@ def graded_stops(p, q, field: SizeField) -> tuple[np.ndarray, np.ndarray]:
     return p + t[cross, None] * (q - p), s[cross]
 
 
-def steering_points(body, field: SizeField, level: int) -> np.ndarray:
-    """Candidate points on rings round every arc, on both sides, where the arc's size has grown by
-    a power of :data:`OCTAVE` (out to the cap), :data:`STEER` sizes apart along each ring; the
-    caller keeps those inside a surface and clear of its boundary (:func:`clear_of`)."""
-    out = []
+def steering_points(body, field: SizeField, level: int, spots=None) -> np.ndarray:
+    """Candidate points on rings round every arc, on both sides, and round every spot (``x, y,
+    size``), where the size has grown by a power of :data:`OCTAVE` (out to the cap), :data:`STEER`
+    sizes apart along each ring; the caller keeps those inside a surface and clear of its boundary
+    (:func:`clear_of`)."""
+    out = [] if spots is None else [spots[:, :2], spot_rings(spots, field)]  # gmsh reads sizes at its points only
     for seg in arcs(body):
         s0 = arc_size(seg, level)
         a0, sweep = seg.angles()
@@ -158,10 +178,25 @@ def clear_of(pts: np.ndarray, sizes: np.ndarray, segs: np.ndarray) -> np.ndarray
     return keep
 
 
-def steering(body, field: SizeField, level: int, rings: list, segs: np.ndarray) -> list:
+def spot_rings(spots: np.ndarray, field: SizeField) -> np.ndarray:
+    """Points on rings round every spot ``(x, y, size)`` where its size has grown by a power of
+    :data:`OCTAVE` (out to the cap), :data:`STEER` sizes apart along each ring (all at once)."""
+    s0 = spots[:, 2]
+    k = np.maximum(1, np.ceil(np.log(field.cap / s0) / math.log(OCTAVE))).astype(int)  # rings a spot
+    spot = np.repeat(np.arange(len(spots)), k)
+    octave = np.arange(len(spot)) - np.repeat(np.cumsum(k) - k, k) + 1
+    s = np.minimum(s0[spot] * OCTAVE**octave, field.cap)
+    rho = (s - s0[spot]) / field.growth
+    n = np.maximum(3, np.ceil(2 * math.pi * rho / (STEER * s))).astype(int)  # points a ring
+    ring = np.repeat(np.arange(len(n)), n)
+    a = 2 * math.pi * (np.arange(len(ring)) - np.repeat(np.cumsum(n) - n, n) + 0.5) / n[ring]
+    return spots[spot[ring], :2] + rho[ring, None] * np.stack([np.cos(a), np.sin(a)], 1)
+
+
+def steering(body, field: SizeField, level: int, rings: list, segs: np.ndarray, spots=None) -> list:
     """The steering points each region ``(outer ring, hole rings)`` holds, clear of every boundary
     segment ``segs`` ``(n, 2, 2)``, and their sizes: ``[(points, sizes), ...]``, region by region."""
-    cand = steering_points(body, field, level)
+    cand = steering_points(body, field, level, spots)
     region = np.full(len(cand), -1)
     for r, (outer, holes) in enumerate(rings):
         mine = inside(outer, cand) if len(cand) else np.zeros(0, bool)
