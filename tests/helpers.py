@@ -57,7 +57,8 @@ def load_example(name: str):
     return module
 
 
-PROGRESS = ("mesh", "assemble", "build", "solve", "recover", "bounds", "refine", "write")  # the phases of cvxdual.progress
+# the phases of cvxdual.progress
+PROGRESS = ("mesh", "assemble", "build", "solve", "recover", "bounds", "refine", "write")
 
 
 def without_progress(err: str) -> list[str]:
