@@ -104,6 +104,7 @@ def test_refined_meshes_keep_the_structure(name, tri):
             np.testing.assert_allclose(_areas_of(mesh, pieces), _areas(scene, 1, tri), rtol=AREA_RTOL)
 
 
+@pytest.mark.slow  # two runs to 5 %, 5 s each
 @pytest.mark.parametrize("tri, kind", [("type1", "concave1"), ("type2", "concave2")])
 def test_the_meshes_of_a_run_keep_both_triangulations(tri, kind):
     """cylinder-in-groove's concave groove: type 1's curved triangles (and their ties) and type 2's
@@ -180,6 +181,7 @@ def test_unmet_tolerance_raises_with_the_best():
     assert best.bounds["error_bound_rel"] == min(rels) == rels[best.adaptive.chosen] > 0.001
 
 
+@pytest.mark.slow  # waits for its 2 s limit
 def test_time_limit_keeps_the_best_cycle():
     with pytest.raises(ToleranceError, match="time limit") as e:
         cvxdual.solve("cylinder-on-block", tol=1e-5, time_limit=2.0)  # 1e-5: beyond any mesh in 2 s

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import CvxdualError
 from ..geometry.grid import Grid
+from ..validate import short
 
 THETA = 0.5  # Dorfler's fraction: 0.3-0.6 is the usual range; 0.5 halved G's cycles count against 0.3 here
 
@@ -72,9 +74,6 @@ def located(space, contributions) -> Located:
 
 def parse_tolerance(tol) -> float:
     """A relative tolerance from ``0.01``, ``"0.01"`` or ``"1%"``: above 0 and below 1."""
-    from ..errors import CvxdualError
-    from ..validate import short
-
     text = str(tol).strip()
     try:
         value = float(text[:-1]) / 100.0 if text.endswith("%") else float(text)
