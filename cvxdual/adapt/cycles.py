@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 from ..errors import MeshError, TimeLimitError, ToleranceError, TooLargeError
 from ..geometry.grid import Grid
-from ..geometry.triangulation import discretize, uniform_grid
+from ..geometry.triangulation import uniform_grid
 from ..kinds import Stop
 from ..progress import Deadline, log, phase
 from ..records import AdaptiveHistory, Cycle
@@ -36,28 +36,28 @@ class Plan:
     level: int | None = None
 
 
-def start_grid(scene, triangulation: str, level: int | None) -> Grid:
-    """The first cycle's grid: ``level``, or the lowest level the scene meshes at (a coarse level
-    may have too few contact pairs, or a face too curved for its first layer)."""
-    if level is not None:
-        return uniform_grid(scene, level)
-    for lv in range(START_LEVELS):
+def first_cycle(solve, scene, level: int | None):
+    """The first cycle's grid and its solution ``solve(grid)``: at ``level``, or at the lowest level the
+    scene meshes at (a coarse level may have too few contact pairs, or a face too curved for its first
+    layer; the solve's meshing is the test)."""
+    levels = [level] if level is not None else list(range(START_LEVELS))
+    for lv in levels:
+        grid = uniform_grid(scene, lv)
         try:
-            discretize(scene, triangulation, lv)
-            return uniform_grid(scene, lv)
+            return grid, solve(grid)
         except MeshError:
-            if lv == START_LEVELS - 1:
+            if lv == levels[-1]:
                 raise
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def refine_to_tolerance(run, certify, scene, triangulation: str, plan: Plan, deadline: Deadline, memory_rows):
+def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, memory_rows):
     """The cycles: ``run(grid)`` solves on a grid, ``certify(sol)`` gives it bounds where its space
     does not; ``memory_rows(n_triangles)`` refuses a cycle too large for memory
     (:func:`~cvxdual.sizing.check_mesh_size`). Returns the solution with its
     :class:`~cvxdual.records.AdaptiveHistory`, or raises :class:`ToleranceError` with the best."""
     t0 = time.perf_counter()
-    grid = start_grid(scene, triangulation, plan.level)
+    grid = None
     cycles: list[Cycle] = []
     best = None
     stop = Stop.TOLERANCE
@@ -65,7 +65,10 @@ def refine_to_tolerance(run, certify, scene, triangulation: str, plan: Plan, dea
         t = time.perf_counter()
         try:
             with deadline.caught():
-                sol = certify(run(grid))
+                if grid is None:
+                    grid, sol = first_cycle(lambda g: certify(run(g)), scene, plan.level)
+                else:
+                    sol = certify(run(grid))
                 b = sol.bounds
                 rel = float(b["error_bound_rel"]) if b["error_bound_rel"] is not None else 0.0
                 met = rel <= plan.tol
@@ -96,9 +99,9 @@ def refine_to_tolerance(run, certify, scene, triangulation: str, plan: Plan, dea
         if nxt.same_mesh(grid):
             stop = Stop.NO_REFINEMENT
             break
-        # the next mesh, estimated before it is built: the strips and column meshes exactly, an outline
-        # body's gmsh part scaled as its strip, twice that where it has new spots (measured 1.1-1.6x)
-        growth = _growth(scene, grid, nxt)
+        # the next mesh, estimated before it is built: scaled as the strip's columns, twice that where
+        # gmsh gets new spots (measured 1.1-1.6x)
+        growth = _growth(grid, nxt)
         if growth * sol.field.n_pieces > plan.max_pieces:
             stop = Stop.MAX_PIECES
             break
@@ -116,7 +119,7 @@ def refine_to_tolerance(run, certify, scene, triangulation: str, plan: Plan, dea
     return sol
 
 
-def _growth(scene, old: Grid, new: Grid) -> float:
+def _growth(old: Grid, new: Grid) -> float:
     """How many times larger the mesh of ``new`` is than that of ``old``, estimated before it is built."""
     ratio = (len(new.columns) - 1) / (len(old.columns) - 1)
     spots = sum(len(s) for s in new.spots) > sum(len(s) for s in old.spots)

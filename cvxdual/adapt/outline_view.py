@@ -44,7 +44,8 @@ def outline_body(body: Body) -> Body:
     ends = {"right": ((x1, f1), (x1, far)), "far": ((x1, far), (x0, far)), "left": ((x0, far), (x0, f0))}
     path, boundary = [], list(body.boundary)  # in their order, those on an interval renamed
     for side in SIDE_ORDER:
-        parts = [bp for bp in body.boundary if bp.on == side]
+        index = [i for i, bp in enumerate(body.boundary) if bp.on == side]
+        parts = [body.boundary[i] for i in index]
         a, b = ends[side]
         axis = 0 if side == "far" else 1
         if not any(bp.interval is not None for bp in parts):
@@ -65,9 +66,9 @@ def outline_body(body: Body) -> Body:
             name = f"{side}:{owners[0].name}" if owners else f"{side}:{len(named)}"
             named.append(name)
             path.append(Part(name, (Segment(p(lo), p(hi)),)))
-            for bp in owners:
-                i = next(i for i, q in enumerate(body.boundary) if q is bp)
-                boundary[i] = replace(bp, on=name, interval=None)
+            for i, bp in zip(index, parts, strict=True):
+                if any(bp is o for o in owners):
+                    boundary[i] = replace(bp, on=name, interval=None)
     return replace(body, far=None, outline=Outline(tuple(path)), boundary=tuple(boundary))
 
 

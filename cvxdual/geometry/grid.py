@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import MeshError
 from ..scene.scene import Scene
-from .outline.sizes import GROWTH, NEAREST
+from .outline.sizes import NEAREST, SizeField, growth
 
 BALANCE = 2.0  # neighbouring column widths differ by at most this factor: a graded strip
 CLOSURE_PASSES = 64  # each pass only splits; a marking closes in a few (the grading spreads one step a pass)
@@ -34,7 +34,7 @@ MIN_WIDTH = 1e-7  # relative to the scene's width: narrower intervals are not sp
 @dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==
 class Grid:
     """An adaptive mesh plan: ``level`` (the uniform level it started from: the arcs' polygons and
-    how fast gmsh's sizes grow, ``GROWTH / 2**level``), the global ``columns`` (before type 2's
+    how fast gmsh's sizes grow, :attr:`growth`), the global ``columns`` (before type 2's
     tangent polygons), ``spots`` per body (sizes asked beyond the strip, ``(m, 3)``: ``x, y,
     size``), and ``start``: the contact set ``(pair_x, active)`` of the last cycle, the fast paths'
     warm start."""
@@ -54,7 +54,7 @@ class Grid:
 
     @property
     def growth(self) -> float:
-        return GROWTH / 2**self.level
+        return growth(self.level)
 
     def with_start(self, pair_x: np.ndarray, active: np.ndarray) -> Grid:
         return replace(self, start=(np.asarray(pair_x, float), np.asarray(active)))
@@ -85,21 +85,16 @@ class Grid:
         return replace(self, columns=cols, spots=new)
 
 
-def _halved(spots: np.ndarray, new: np.ndarray, growth: float) -> np.ndarray:
+def _halved(spots: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
     """The ``new`` spots, each at most half the size the old ``spots`` ask at its place."""
     if not len(spots):
         return new
-    from scipy.spatial import cKDTree
-
-    k = min(NEAREST, len(spots))
-    d, j = cKDTree(spots[:, :2]).query(new[:, :2], k=k)
-    d, j = d.reshape(len(new), k), j.reshape(len(new), k)
-    asked = np.min(spots[j, 2] + growth * np.maximum(d - spots[j, 2], 0.0), axis=1)
+    asked = SizeField(spots[:, :2], spots[:, 2], np.inf, rate).at(new[:, :2])
     return np.concatenate([new[:, :2], np.minimum(new[:, 2], 0.5 * asked)[:, None]], 1)
 
 
-def _covered(spots: np.ndarray, growth: float) -> np.ndarray:
-    """The spots whose size no smaller spot's field (size + ``growth`` * distance, among the
+def _covered(spots: np.ndarray, rate: float) -> np.ndarray:
+    """The spots whose size no smaller spot's field (size + ``rate`` * distance, among the
     :data:`~cvxdual.geometry.outline.sizes.NEAREST` nearest) already asks for."""
     from scipy.spatial import cKDTree
 
@@ -108,7 +103,7 @@ def _covered(spots: np.ndarray, growth: float) -> np.ndarray:
     d, j = cKDTree(spots[:, :2]).query(spots[:, :2], k=k)
     d, j = d.reshape(len(spots), k), j.reshape(len(spots), k)
     s = spots[j, 2]
-    asks = s + growth * np.maximum(d - s, 0.0)
+    asks = s + rate * np.maximum(d - s, 0.0)
     earlier = j < np.arange(len(spots))[:, None]  # smaller, or as small and first
     return spots[~np.any(earlier & (asks <= spots[:, 2:3]), axis=1)]
 

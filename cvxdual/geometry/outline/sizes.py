@@ -48,6 +48,11 @@ def arc_edges(seg, level: int) -> int:
     return max(1, math.ceil(abs(seg.angles()[1]) / (math.pi / 2) * ARC_EDGES - 1e-9)) * 2**level
 
 
+def growth(level: int) -> float:
+    """How fast the size grows with the distance from a source at ``level`` (:data:`GROWTH` halved a level)."""
+    return GROWTH / 2**level
+
+
 def spot_edges(seg, level: int, spots) -> int:
     """Edges of a free arc's polygon: :func:`arc_edges`, or more where an adaptive run's ``spots``
     (``x, y, size``) ask smaller sizes on the arc (equal edges, none longer than the least asked)."""
@@ -57,7 +62,7 @@ def spot_edges(seg, level: int, spots) -> int:
     q = seg.sample(max(64, n))
     d = np.hypot(q[:, None, 0] - spots[None, :, 0], q[:, None, 1] - spots[None, :, 1])
     s = spots[None, :, 2]
-    least = float(np.min(s + GROWTH / 2**level * np.maximum(d - s, 0.0)))
+    least = float(np.min(s + growth(level) * np.maximum(d - s, 0.0)))
     length = math.dist(seg.start, seg.center) * abs(seg.angles()[1])
     return max(n, math.ceil(length / least - 1e-9))
 
@@ -89,7 +94,7 @@ class SizeField:
             q = seg.sample(arc_edges(seg, level))
             src.append(q)
             size.append(np.full(len(q), arc_size(seg, level)))
-        return cls(np.concatenate(src), np.concatenate(size), 2.0 * float(np.diff(columns).max()), GROWTH / 2**level)
+        return cls(np.concatenate(src), np.concatenate(size), 2.0 * float(np.diff(columns).max()), growth(level))
 
     @cached_property
     def _tree(self):
@@ -136,7 +141,7 @@ def steering_points(body, field: SizeField, level: int, spots=None) -> np.ndarra
     size``), where the size has grown by a power of :data:`OCTAVE` (out to the cap), :data:`STEER`
     sizes apart along each ring; the caller keeps those inside a surface and clear of its boundary
     (:func:`clear_of`)."""
-    out = [] if spots is None else [spots[:, :2], spot_rings(spots, field)]  # gmsh reads sizes at its points only
+    out = [] if spots is None else [spot_points(spots, field)]  # gmsh reads sizes at its points only
     for seg in arcs(body):
         s0 = arc_size(seg, level)
         a0, sweep = seg.angles()
@@ -178,9 +183,10 @@ def clear_of(pts: np.ndarray, sizes: np.ndarray, segs: np.ndarray) -> np.ndarray
     return keep
 
 
-def spot_rings(spots: np.ndarray, field: SizeField) -> np.ndarray:
-    """Points on rings round every spot ``(x, y, size)`` where its size has grown by a power of
-    :data:`OCTAVE` (out to the cap), :data:`STEER` sizes apart along each ring (all at once)."""
+def spot_points(spots: np.ndarray, field: SizeField) -> np.ndarray:
+    """Every spot ``(x, y, size)`` and points on rings round it where its size has grown by a power of
+    :data:`OCTAVE` (out to the cap), :data:`STEER` sizes apart along each ring; spot by spot (the order
+    decides which of two close points :func:`clear_of` keeps), all at once."""
     s0 = spots[:, 2]
     k = np.maximum(1, np.ceil(np.log(field.cap / s0) / math.log(OCTAVE))).astype(int)  # rings a spot
     spot = np.repeat(np.arange(len(spots)), k)
@@ -190,7 +196,9 @@ def spot_rings(spots: np.ndarray, field: SizeField) -> np.ndarray:
     n = np.maximum(3, np.ceil(2 * math.pi * rho / (STEER * s))).astype(int)  # points a ring
     ring = np.repeat(np.arange(len(n)), n)
     a = 2 * math.pi * (np.arange(len(ring)) - np.repeat(np.cumsum(n) - n, n) + 0.5) / n[ring]
-    return spots[spot[ring], :2] + rho[ring, None] * np.stack([np.cos(a), np.sin(a)], 1)
+    pts = np.concatenate([spots[:, :2], spots[spot[ring], :2] + rho[ring, None] * np.stack([np.cos(a), np.sin(a)], 1)])
+    owner = np.concatenate([np.arange(len(spots)), spot[ring]])
+    return pts[np.argsort(owner, kind="stable")]  # each spot, then its rings
 
 
 def steering(body, field: SizeField, level: int, rings: list, segs: np.ndarray, spots=None) -> list:
