@@ -59,7 +59,7 @@ def located(space, contributions) -> Located:
     xb = mesh.points[nodes].mean(1) if len(nodes) else np.zeros((0, 2))
     cen = space.X.mean(1)
     n_c = len(xc)
-    weight = np.concatenate([c["element"], np.asarray(c["column"])[:n_s], 0.5 * c["contact"], 0.5 * c["contact"],
+    weight = np.concatenate([c["element"], c["column"], 0.5 * c["contact"], 0.5 * c["contact"],
                              c["continuation"]])
     body = np.concatenate([space.body, bs, np.zeros(n_c, int), np.ones(n_c, int), cbody]).astype(int)
     x = np.concatenate([cen[:, 0], xs, xc, xc, xb[:, 0]])
