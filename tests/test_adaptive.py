@@ -16,6 +16,7 @@ from cvxdual.adapt.outline_view import outline_body, outline_scene
 from cvxdual.cli import main
 from cvxdual.errors import CvxdualError, SceneError, ToleranceError
 from cvxdual.geometry.grid import BALANCE, Grid
+from cvxdual.geometry.outline.cuts import find_cuts
 from cvxdual.geometry.triangulation import discretize, uniform_grid
 from cvxdual.pipeline import as_scene, build_system, space_of
 from cvxdual.reference.exact import exact_reference
@@ -134,6 +135,23 @@ def test_spots_refine_gmsh_locally():
     # gmsh's size is a target edge length: its triangles' longest edge is up to ~1.7 times it
     assert fine_edge <= 2 * spot[0, 2] and coarse_edge > 10 * spot[0, 2]
     assert n_coarse < n_fine < 2 * n_coarse  # local: the rest of the body keeps its triangles
+
+
+def test_cuts_stay_at_the_start_levels_nodes():
+    # a lower body [0, 8] x [-10, 0]: its chain at y = -1, crowded on [0, 1] as refinement leaves it
+    base = np.linspace(0.0, 8.0, 9)
+    x = np.unique(np.concatenate([base, np.linspace(0.0, 1.0, 33)]))
+    chain = np.stack([x, np.full(len(x), -1.0)], 1)
+    path = [(np.array([[8.0, -1.0], [8.0, -10.0]]), True), (np.array([[8.0, -10.0], [0.0, -10.0]]), True),
+            (np.array([[0.0, -10.0], [0.0, -1.0]]), True)]  # right side, bottom, left side: the loop's path
+
+    def cut_x(**kw):
+        return [float(c.end[0]) for c in find_cuts(chain, -1, path, [], lambda p: np.full(len(p), 0.2), **kw)]
+
+    crowded = cut_x()
+    assert crowded == cut_x(cut_x=x)  # a uniform level's own columns: the rule is unchanged there
+    assert sum(v < 1.0 for v in crowded) >= 4  # by node count, most cuts land where the nodes crowd
+    assert cut_x(cut_x=base) == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]  # by the start level's nodes: spread
 
 
 def test_dorfler_marks_the_fewest_largest():

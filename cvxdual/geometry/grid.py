@@ -36,12 +36,15 @@ class Grid:
     """An adaptive mesh plan: ``level`` (the uniform level it started from: the arcs' polygons and
     how fast gmsh's sizes grow, :attr:`growth`), the global ``columns`` (before type 2's
     tangent polygons), ``spots`` per body (sizes asked beyond the strip, ``(m, 3)``: ``x, y,
-    size``), and ``start``: the contact set ``(pair_x, active)`` of the last cycle, the fast paths'
-    warm start."""
+    size``), ``base``: the columns of that level, where gmsh's surfaces are cut as on its mesh
+    (refinement crowds the columns where ``G`` lives; cuts crowded there leave slivers between
+    them far from the face), and ``start``: the contact set ``(pair_x, active)`` of the last
+    cycle, the fast paths' warm start."""
 
     level: int
     columns: np.ndarray
     spots: tuple
+    base: np.ndarray
     start: tuple | None = None
 
     @classmethod
@@ -50,7 +53,8 @@ class Grid:
         (:func:`~cvxdual.geometry.triangulation.uniform_grid`): its mesh is the level's, node for node."""
         if any(b.is_column for b in scene.bodies):
             raise MeshError("internal: an adaptive grid meshes outline bodies only (adapt.outline_view)")
-        return cls(int(level), np.asarray(columns, float), tuple(np.zeros((0, 3)) for _ in scene.bodies))
+        columns = np.asarray(columns, float)
+        return cls(int(level), columns, tuple(np.zeros((0, 3)) for _ in scene.bodies), columns)
 
     @property
     def growth(self) -> float:

@@ -350,13 +350,14 @@ def side_breaks(body: Body, f0: float, f1: float) -> list[float]:
 
 
 def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | None = None,
-               face_y=(None, None), spots=(None, None)) -> Mesh:
+               face_y=(None, None), spots=(None, None), cut_columns=None) -> Mesh:
     """Build the column mesh of ``scene`` at ``level`` (default: the scene's default level).
 
     ``columns`` replaces the graded global columns; ``face_y[k]`` (a function of the column
-    abscissae) replaces the face heights of body ``k``'s face nodes; ``spots[k]`` ``(m, 3)`` sizes
-    ``(x, y, size)`` asked of outline body ``k``'s part beyond the strip (an adaptive grid,
-    :class:`~cvxdual.geometry.grid.Grid`).
+    abscissae) replaces the face heights of body ``k``'s face nodes. An adaptive grid
+    (:class:`~cvxdual.geometry.grid.Grid`) gives ``spots[k]`` ``(m, 3)``, sizes ``(x, y, size)``
+    asked of outline body ``k``'s part beyond the strip, and ``cut_columns``, the global columns
+    of the level it started from, where gmsh's surfaces are cut as on that level's mesh.
     """
     level = check_level(scene.mesh.default_level if level is None else level)
     cols = column_abscissae(scene, level) if columns is None else np.asarray(columns, float)
@@ -378,7 +379,8 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
             bm = BodyMesh(body, offset, c, eta, fy)
         else:
             inner = body.face.value(c) + body.sign * strip_depth(c)
-            rest = mesh_rest(body, c, inner, level, spots[k])
+            cuts = None if cut_columns is None else cut_columns[(cut_columns >= x0) & (cut_columns <= x1)]
+            rest = mesh_rest(body, c, inner, level, spots[k], cuts)
             bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest)
             # a wrong loop handed to gmsh meshes the wrong region without an error: check it against the outline
             check_body_mesh(body, bm.points(), bm.triangles() - offset, bm.side_nodes("face") - offset, rest.parts)

@@ -109,12 +109,15 @@ def discretize(scene: Scene, triangulation: str = "type1", level: int | Grid | N
         level, cols = grid.level, grid.columns
     polygons: list[list] = [[], []]
     face_y = [None, None]
+    base = None if grid is None else grid.base
     if tri == "type2":
         cols, polygons = _tangent_polygons(scene, cols)
+        base = None if grid is None else _tangent_polygons(scene, base)[0]  # the start level's columns, as meshed
         for k, body in enumerate(scene.bodies):
             if polygons[k]:
                 face_y[k] = _polygon_heights(body, polygons[k])
-    mesh = build_mesh(scene, level, columns=cols, face_y=face_y, spots=(None, None) if grid is None else grid.spots)
+    mesh = build_mesh(scene, level, columns=cols, face_y=face_y, spots=(None, None) if grid is None else grid.spots,
+                      cut_columns=base)
     return (mesh, *_pieces(mesh, tri, polygons))
 
 

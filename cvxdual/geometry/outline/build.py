@@ -27,9 +27,12 @@ def held_parts(body) -> set[str]:
 class OutlineBuild:
     """The gmsh model of ``body`` beyond the strip's inner chain ``(columns, inner_y)`` at
     ``level``, as it is built. ``halved``: gmsh meshes at the sizes of ``level - 1`` through every
-    other chain node (``step`` 2, ``glevel`` the level gmsh's sizes are of), to be refined once."""
+    other chain node (``step`` 2, ``glevel`` the level gmsh's sizes are of), to be refined once.
+    ``spots`` and ``cut_columns``: an adaptive grid's sizes asked beyond the strip, and the columns
+    of the level it started from, where the cuts into surfaces are tried
+    (:func:`~cvxdual.geometry.outline.cuts.find_cuts`)."""
 
-    def __init__(self, gmsh, body, columns, inner_y, level: int, halved: bool = True, spots=None):
+    def __init__(self, gmsh, body, columns, inner_y, level: int, halved: bool = True, spots=None, cut_columns=None):
         self.gmsh, self.geo = gmsh, gmsh.model.geo
         gmsh.model.add(body.name)
         self.body, self.columns, self.inner_y, self.level = body, columns, inner_y, level
@@ -40,6 +43,7 @@ class OutlineBuild:
         # uniform level from 1 has one; an adaptive grid's may not, and is meshed at its own sizes)
         halved = halved and (len(columns) - 1) % 2 == 0 and spots is None
         self.spots = spots  # an adaptive run's sizes (x, y, size), or None
+        self.cut_columns = cut_columns
         self.step, self.glevel = (2, level - 1) if level >= 1 and halved else (1, level)
         cols = columns[::self.step]
         self.w = strip_depth(cols) / STRIP_ASPECT  # the chain points' sizes

@@ -6,8 +6,9 @@ inner chain at a node and runs away from the face: straight to the outline, or, 
 the way, to the hole's nearest vertex, round the hole (each side keeps one half of it) and on
 from its far vertex. It ends inside a straight, splittable part of the outer loop (not a strip
 edge, not an arc's polygon), crosses nothing and keeps half an element size clear of every other
-outline vertex; cuts are tried from eight evenly spaced chain nodes, and a body no cut fits stays
-one surface. Curves come as ``(polyline, splittable)``: a line's two ends, an arc's samples. Pure
+outline vertex; cuts are tried from eight evenly spaced chain nodes (of the level an adaptive grid
+started from: its nodes keep the cuts as spread as there, where refinement crowds the chain), and a
+body no cut fits stays one surface. Curves come as ``(polyline, splittable)``: a line's two ends, an arc's samples. Pure
 geometry: :mod:`~cvxdual.geometry.outline.regions` builds the gmsh loops from a :class:`Cut`."""
 
 from __future__ import annotations
@@ -35,18 +36,22 @@ class Cut:
     far: np.ndarray | None = None
 
 
-def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size) -> list[Cut]:
+def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size, cut_x=None) -> list[Cut]:
     """The clean cuts from the candidate chain nodes, left to right (none: one surface). ``sign``
     points from the face into the body, ``holes`` holds each hole's curves in loop order,
-    ``size(points)`` is the element size asked there. Cuts through one hole, or ending in an order
-    along the outline that differs from their order along the chain, are dropped."""
+    ``size(points)`` is the element size asked there. The candidates are the chain nodes at
+    fractions 1/8 .. 7/8 of the nodes of ``cut_x`` (default: the chain's abscissae), each the chain
+    node nearest in ``x``. Cuts through one hole, or ending in an order along the outline that
+    differs from their order along the chain, are dropped."""
     curves = path + [c for h in holes for c in h]
     owner = np.concatenate([np.full(len(p) - 1, i) for i, (p, _) in enumerate(curves)])
     segs = np.concatenate([np.stack([p[:-1], p[1:]], 1) for p, _ in curves])
     hole_of = np.concatenate([[-1] * len(path)] + [[i] * len(h) for i, h in enumerate(holes)])
     nc = len(chain)
+    base = chain[:, 0] if cut_x is None else np.asarray(cut_x, float)
+    at = base[[int(round(i * (len(base) - 1) / PIECES)) for i in range(1, PIECES)]]
     cuts, used = [], set()
-    for k in sorted({int(round(i * (nc - 1) / PIECES)) for i in range(1, PIECES)}):
+    for k in sorted({int(np.argmin(np.abs(chain[:, 0] - x))) for x in at}):
         cut = _try(k, chain[k], sign, path, holes, segs, owner, hole_of, size) if 1 <= k <= nc - 2 else None
         if cut is not None and (cut.hole is None or cut.hole not in used):
             cuts.append(cut)

@@ -42,15 +42,17 @@ def mesh_threads() -> int:
     return max(1, min(2, int(limit) if limit.isdigit() else (os.cpu_count() or 1)))
 
 
-def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None) -> RestMesh:
-    """Mesh the body between the strip's inner chain ``(columns, inner_y)`` and its outline.
+def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None, cut_columns=None) -> RestMesh:
+    """Mesh the body between the strip's inner chain ``(columns, inner_y)`` and its outline; an
+    adaptive grid's ``spots`` and ``cut_columns`` as in :class:`~cvxdual.geometry.outline.build.OutlineBuild`.
 
     The last eight meshes are kept (read-only arrays): the size estimate meshes a small level in
     full (:func:`cvxdual.geometry.mesh.mesh_size`) and the fast path's warm start meshes coarse
     levels; a run of two bodies meets each of them again."""
     columns, inner_y = np.asarray(columns, float), np.asarray(inner_y, float)
     spots = None if spots is None or not len(spots) else np.ascontiguousarray(spots, float).reshape(-1, 3).tobytes()
-    return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level), spots)
+    cuts = None if cut_columns is None else np.asarray(cut_columns, float).tobytes()
+    return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level), spots, cuts)
 
 
 def forget_meshes() -> None:
@@ -68,11 +70,13 @@ def gmsh_seconds() -> float:
 
 
 @lru_cache(maxsize=8)
-def _cached(body, columns: bytes, inner_y: bytes, level: int, spots: bytes | None = None) -> RestMesh:
+def _cached(body, columns: bytes, inner_y: bytes, level: int, spots: bytes | None = None,
+            cuts: bytes | None = None) -> RestMesh:
     t = time.perf_counter()
     try:
         rest = in_gmsh("cvxdual.geometry.outline.mesher:gmsh_mesh", body, np.frombuffer(columns),
                        np.frombuffer(inner_y), level, None if spots is None else np.frombuffer(spots).reshape(-1, 3),
+                       None if cuts is None else np.frombuffer(cuts),
                        what=f"meshing body {body.name!r} at level {level}")
     finally:
         _SPENT[0] += time.perf_counter() - t
@@ -82,13 +86,13 @@ def _cached(body, columns: bytes, inner_y: bytes, level: int, spots: bytes | Non
     return rest
 
 
-def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None) -> RestMesh:
+def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=None, cut_columns=None) -> RestMesh:
     """:func:`mesh_rest`'s work, done by gmsh: runs in gmsh's own process (:mod:`~cvxdual.geometry.outline.fence`)."""
     gmsh = import_gmsh()
     gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
-        return mesh_body(gmsh, body, columns, inner_y, level, spots=spots)
+        return mesh_body(gmsh, body, columns, inner_y, level, spots=spots, cut_columns=cut_columns)
     except MeshError:
         raise
     except Exception as e:  # gmsh reports its failures as plain exceptions
@@ -98,12 +102,12 @@ def gmsh_mesh(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=
         gmsh.finalize()
 
 
-def mesh_body(gmsh, body, columns, inner_y, level, halved=True, spots=None) -> RestMesh:
+def mesh_body(gmsh, body, columns, inner_y, level, halved=True, spots=None, cut_columns=None) -> RestMesh:
     """The body's mesh beyond the strip's inner chain ``(columns, inner_y)``. ``halved``: at level
     ``L >= 1`` gmsh meshes at the sizes of level ``L - 1`` and the mesh is refined once; where
     that cannot keep level ``L``'s polygons (they clash as gmsh gets them, or a fine node folds a
     triangle) the body is meshed again at level ``L``'s own sizes."""
-    build = OutlineBuild(gmsh, body, columns, inner_y, level, halved, spots)
+    build = OutlineBuild(gmsh, body, columns, inner_y, level, halved, spots, cut_columns)
     check_strip(body, build.chain)
     add_loops(build)
     if not polygons_clear(build):
@@ -124,7 +128,7 @@ def mesh_body(gmsh, body, columns, inner_y, level, halved=True, spots=None) -> R
 def _unhalved(build: OutlineBuild) -> RestMesh:
     build.gmsh.model.remove()
     return mesh_body(build.gmsh, build.body, build.columns, build.inner_y, build.level, halved=False,
-                     spots=build.spots)
+                     spots=build.spots, cut_columns=build.cut_columns)
 
 
 def add_surfaces(build: OutlineBuild, regions: list) -> list[int]:

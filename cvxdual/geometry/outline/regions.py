@@ -22,7 +22,8 @@ def cut_regions(build: OutlineBuild) -> list:
     """The regions of the rest, left to right: one (the whole loop with its holes) where no cut fits."""
     b = build
     cuts = find_cuts(b.chain[::b.step], b.body.sign, [b.shape[c] for c in b.loop[:b.n_path]],
-                     [[b.shape[c] for c in cs] for cs in b.holes], b.field.at)
+                     [[b.shape[c] for c in cs] for cs in b.holes], b.field.at,
+                     None if b.cut_columns is None else b.cut_columns[::b.step])
     if not cuts:
         return [(b.loop, b.holes)]
     path, hit_at = _split_path(b, cuts)
