@@ -144,10 +144,14 @@ def summary(df: pd.DataFrame, target: float) -> pd.DataFrame:
         nu, how_u = pieces_for(u, target, True)
         hit = a[a.bound_rel <= target]
         ta = hit.seconds.iloc[0] if len(hit) else float("nan")
-        tu = u[u.bound_rel <= target].seconds.iloc[0] if (u.bound_rel <= target).any() else float("nan")
+        under = u.bound_rel <= target
+        tu = u[under].seconds.iloc[0] if under.any() else float("nan")
+        # a user who does not know the level solves level after level until one is under the target
+        sweep = u[u.step <= u[under].step.iloc[0]].seconds.sum() if under.any() else float("nan")
         out.append(dict(scene=label, side=side, cycles=len(a), adaptive_rate=rate(a, 2), uniform_rate=rate(u, 1),
                         adaptive_pieces=na, adaptive_how=how_a, uniform_pieces=nu, uniform_how=how_u,
-                        pieces_ratio=nu / na, adaptive_s=ta, uniform_level_s=tu, best_adaptive=a.bound_rel.min(),
+                        pieces_ratio=nu / na, adaptive_s=ta, uniform_level_s=tu, uniform_sweep_s=sweep,
+                        best_adaptive=a.bound_rel.min(),
                         # the first cycle under the target, and every uniform level from 1: guaranteed?
                         guaranteed_at_target=bool(hit.guaranteed.iloc[0]) if len(hit) else None,
                         uniform_guaranteed=bool(u[u.step >= 1].guaranteed.all()),
@@ -248,7 +252,9 @@ def report(df: pd.DataFrame, timed: pd.DataFrame, target: float, quick: bool, se
              "P1's optimum, 1 P2's). `uniform_how`: whether the uniform pieces were reached (`measured`) or "
              "extrapolated from the last three levels. `adaptive_s`: the run's seconds to the cycle under the "
              "target (all earlier cycles included); `uniform_level_s`: the one uniform solve at the first level "
-             "under it. `brackets_apart`: pairs of an adaptive cycle and a uniform level whose brackets share no "
+             "under it; `uniform_sweep_s`: levels from the first up to that one, as a run that does not know "
+             "the level would take them (the study's own timings, not side by side). "
+             "`brackets_apart`: pairs of an adaptive cycle and a uniform level whose brackets share no "
              "point (0: all hold the same energy).", "",
              md_table(table, floatfmt=".3g"), ""]
     if len(timed):

@@ -133,9 +133,11 @@ def test_ctrl_c_stops_the_command_while_gmsh_meshes():
     """Ctrl-C (SIGINT to the command) while gmsh meshes: the command says 'interrupted', exits 130
     within 2 s, and gmsh's process is gone (it is in its own session: the terminal's Ctrl-C
     reaches the command, which ends it)."""
+    # as from a terminal: SIGINT at its default, also where the tests themselves run as a background
+    # job of a shell without job control (`.ci/run &`), whose children inherit SIGINT ignored
     proc = subprocess.Popen([sys.executable, "-m", "cvxdual", "solve", "--scene", "block-with-hole", "--level",
                              str(SLOW_LEVEL), "--solver", "fast", "--no-output"], stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT)
+                            cwd=ROOT, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while not children_of(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -8,8 +8,9 @@ from its far vertex. It ends inside a straight, splittable part of the outer loo
 edge, not an arc's polygon), crosses nothing and keeps half an element size clear of every other
 outline vertex; cuts are tried from eight evenly spaced chain nodes (of the level an adaptive grid
 started from: its nodes keep the cuts as spread as there, where refinement crowds the chain), and a
-body no cut fits stays one surface. Curves come as ``(polyline, splittable)``: a line's two ends, an arc's samples. Pure
-geometry: :mod:`~cvxdual.geometry.outline.regions` builds the gmsh loops from a :class:`Cut`."""
+body no cut fits stays one surface. Curves come as ``(polyline, splittable)``: a line's two ends,
+an arc's samples. Pure geometry: :mod:`~cvxdual.geometry.outline.regions` builds the gmsh loops
+from a :class:`Cut`."""
 
 from __future__ import annotations
 
