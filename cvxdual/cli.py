@@ -134,7 +134,8 @@ def _cmd_solve(args) -> int:
         try:
             sol = solve(scene, args.triangulation, args.level, solver, stress_space=stress_space, bounds=args.bounds,
                         max_memory=args.max_memory, time_limit=time_limit, verbose=args.verbose,
-                        kinematic=args.kinematic, tol=args.tol, max_pieces=args.max_pieces)
+                        kinematic=args.kinematic, tol=args.tol, max_pieces=args.max_pieces,
+                        theta=args.theta)
         except ToleranceError as e:  # the tolerance was not met: its best certified result is written
             sol, unmet = e.solution, e
     written, t_write = [], None
@@ -223,6 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-pieces", type=int, default=None, metavar="N",
                    help="with --tol: stop before a cycle with more pieces (default: 400000); the best certified "
                    "result is written and the exit status is 1")
+    s.add_argument("--theta", default=None, metavar="THETA",
+                   help="with --tol: Dorfler's fraction of the bound's G marked for refinement each cycle "
+                   "(default: 0.5; smaller marks less a cycle and takes more cycles)")
     s.add_argument("--solver", default=None, help="a CVXPY solver name, or fast: the active-set path (default: "
                    f"the CVXPY solver measured fastest at the mesh's size, CLARABEL below {LARGE_QP:.0e} pieces and "
                    "SCS above, Clarabel taking over where SCS fails; with --stress-space eq the fast path)")

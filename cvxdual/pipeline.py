@@ -76,7 +76,7 @@ def build_model(scene, triangulation: str = "type1", level: int | None = None, l
 def solve(scene, triangulation: str = "type1", level: int | None = None, solver: str | None = None,
           check: bool = True, warm_start: bool = True, stress_space: str | None = None, bounds: bool = False,
           max_memory=None, fallback: bool = True, time_limit: float | None = None, verbose: bool = False,
-          kinematic: str = "p2", tol=None, max_pieces: int | None = None, **solver_options) -> Solution:
+          kinematic: str = "p2", tol=None, max_pieces: int | None = None, theta=None, **solver_options) -> Solution:
     """Solve the discrete dual problem of ``scene``; see the module docstring.
 
     ``solver`` is a CVXPY solver name or ``"fast"``, the active-set path of :mod:`cvxdual.activeset`
@@ -105,8 +105,9 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     ``tol`` (``0.01`` or ``"1%"``) solves to a certified tolerance instead of at one level
     (:mod:`cvxdual.adapt`, docs/adaptive.md): cycles of solve, certify, mark and refine from a coarse
     mesh (``level``, if given, is the first cycle's) until the certified relative energy error is at
-    most ``tol``; the solution's ``adaptive`` holds every cycle. Where ``max_pieces`` (default
-    400000), the memory or ``time_limit`` stop it first,
+    most ``tol``; the solution's ``adaptive`` holds every cycle. ``theta`` is Dorfler's fraction of
+    ``G`` marked each cycle (default 0.5). Where ``max_pieces`` (default 400000), the memory or
+    ``time_limit`` stop it first,
     :class:`~cvxdual.errors.ToleranceError` is raised with the best certified solution as its
     ``solution``.
     """
@@ -115,10 +116,13 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
     if tol is not None:
         with deadline.enforced():
             return _solve_to(deadline, scene, triangulation, level, solver, stress_space or Space.EQ, max_memory,
-                             kinematic, tol, max_pieces, warm_start)
+                             kinematic, tol, max_pieces, theta, warm_start)
     if max_pieces is not None:
         raise CvxdualError("max_pieces bounds a run to a tolerance: give tol too, or drop it",
                            cli="--max-pieces bounds a run to a tolerance: give --tol too, or drop it")
+    if theta is not None:
+        raise CvxdualError("theta marks the cycles of a run to a tolerance: give tol too, or drop it",
+                           cli="--theta marks the cycles of a run to a tolerance: give --tol too, or drop it")
     with deadline.enforced():  # from the start: the size probe's meshes count too
         return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space or Space.P0,
                       bounds, max_memory, fallback, verbose, kinematic, solver_options)
@@ -186,17 +190,18 @@ def _solve(deadline, scene, triangulation, level, solver, check, warm_start, str
 
 
 def _solve_to(deadline, scene, triangulation, level, solver, stress_space, max_memory, kinematic, tol, max_pieces,
-              warm_start) -> Solution:
+              theta, warm_start) -> Solution:
     """A run to the certified tolerance ``tol`` (:func:`~cvxdual.adapt.cycles.refine_to_tolerance`)."""
     from .adapt.cycles import MAX_PIECES, Plan, refine_to_tolerance
-    from .adapt.marking import parse_tolerance
+    from .adapt.marking import THETA, parse_theta, parse_tolerance
     from .adapt.outline_view import outline_scene
 
     scene = outline_scene(as_scene(scene))  # local refinement: every body meshed by its outline
     gmsh0 = gmsh_seconds()
     triangulation = check_triangulation(triangulation)
     space = space_of(stress_space, kinematic)
-    plan = Plan(tol=parse_tolerance(tol), max_pieces=_max_pieces(MAX_PIECES if max_pieces is None else max_pieces),
+    plan = Plan(tol=parse_tolerance(tol), theta=parse_theta(THETA if theta is None else theta),
+                max_pieces=_max_pieces(MAX_PIECES if max_pieces is None else max_pieces),
                 level=None if level is None else check_level(level))
     if scene.friction is not None:
         raise CvxdualError("a run to a tolerance is certified, and the bounds are frictionless; drop the scene's "

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cvxdual
-from cvxdual.adapt.marking import dorfler, mark, parse_tolerance
+from cvxdual.adapt.marking import dorfler, mark, parse_theta, parse_tolerance
 from cvxdual.adapt.outline_view import outline_body, outline_scene
 from cvxdual.cli import main
 from cvxdual.errors import CvxdualError, SceneError, ToleranceError
@@ -234,6 +234,27 @@ def test_max_pieces_needs_a_tolerance(capsys):
     assert "--tol" in capsys.readouterr().err
     with pytest.raises(CvxdualError, match="max_pieces must be"):
         cvxdual.solve("patch", tol=0.01, max_pieces=0)
+
+
+@pytest.mark.parametrize("bad", [0, 0.0, -0.5, 1.5, "half", True, float("nan"), None])
+def test_bad_theta(bad):
+    with pytest.raises(CvxdualError, match="theta must be"):
+        parse_theta(bad)
+
+
+def test_theta_marks_its_share(capsys):
+    runs = {th: cvxdual.solve("hertz", tol=0.03, theta=th).adaptive for th in (0.3, 0.5)}
+    for th, h in runs.items():
+        assert h.theta == th and h.met
+        # Dorfler: the fewest largest parts holding at least theta of G (every cycle but the last marks)
+        assert all(c.marked_share >= th for c in h.cycles[:-1]) and h.cycles[-1].marked_share is None
+    # the first cycles are the same solve: a smaller theta marks no more of it
+    assert runs[0.3].cycles[0].pieces == runs[0.5].cycles[0].pieces
+    assert runs[0.3].cycles[0].marked_share <= runs[0.5].cycles[0].marked_share
+    assert main(["solve", "--scene", "patch", "--theta", "0.3", "--no-output"]) == 1  # theta without tol
+    assert main(["solve", "--scene", "patch", "--tol", "1%", "--theta", "2", "--no-output"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "--tol" in err[0] and "--theta must be" in err[1]
 
 
 def test_a_grid_meshes_outline_bodies_only():

@@ -86,6 +86,21 @@ def parse_tolerance(tol) -> float:
     return value
 
 
+def parse_theta(theta) -> float:
+    """Dorfler's fraction from ``0.3`` or ``"0.3"``: above 0 and at most 1 (1 marks every part of ``G``)."""
+    try:
+        value = float(str(theta).strip())
+        ok = not isinstance(theta, bool) and 0.0 < value <= 1.0
+    except ValueError:
+        ok = False
+    if not ok:
+        raise CvxdualError(f"theta must be Dorfler's fraction of G to mark, above 0 and at most 1 (0.3-0.6 is usual), "
+                           f"got {short(theta)}",
+                           cli=f"--theta must be Dorfler's fraction of G to mark, above 0 and at most 1 (0.3-0.6 is "
+                               f"usual), got {short(theta)}")
+    return value
+
+
 def dorfler(weight: np.ndarray, theta: float) -> np.ndarray:
     """The smallest set of the largest ``weight`` holding at least ``theta`` of their sum (bool)."""
     order = np.argsort(weight)[::-1]
