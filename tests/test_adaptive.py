@@ -149,9 +149,9 @@ def test_cuts_stay_at_the_start_levels_nodes():
         return [float(c.end[0]) for c in find_cuts(chain, -1, path, [], lambda p: np.full(len(p), 0.2), **kw)]
 
     crowded = cut_x()
-    assert crowded == cut_x(cut_x=x)  # a uniform level's own columns: the rule is unchanged there
+    assert crowded == cut_x(cut_columns=x)  # a uniform level's own columns: the rule is unchanged there
     assert sum(v < 1.0 for v in crowded) >= 4  # by node count, most cuts land where the nodes crowd
-    assert cut_x(cut_x=base) == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]  # by the start level's nodes: spread
+    assert cut_x(cut_columns=base) == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]  # by the start level's nodes: spread
 
 
 def test_dorfler_marks_the_fewest_largest():

@@ -37,11 +37,11 @@ class Cut:
     far: np.ndarray | None = None
 
 
-def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size, cut_x=None) -> list[Cut]:
+def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size, cut_columns=None) -> list[Cut]:
     """The clean cuts from the candidate chain nodes, left to right (none: one surface). ``sign``
     points from the face into the body, ``holes`` holds each hole's curves in loop order,
     ``size(points)`` is the element size asked there. The candidates are the chain nodes at
-    fractions 1/8 .. 7/8 of the nodes of ``cut_x`` (default: the chain's abscissae), each the chain
+    fractions 1/8 .. 7/8 of the nodes of ``cut_columns`` (default: the chain's abscissae), each the chain
     node nearest in ``x``. Cuts through one hole, or ending in an order along the outline that
     differs from their order along the chain, are dropped."""
     curves = path + [c for h in holes for c in h]
@@ -49,7 +49,7 @@ def find_cuts(chain: np.ndarray, sign: int, path: list, holes: list, size, cut_x
     segs = np.concatenate([np.stack([p[:-1], p[1:]], 1) for p, _ in curves])
     hole_of = np.concatenate([[-1] * len(path)] + [[i] * len(h) for i, h in enumerate(holes)])
     nc = len(chain)
-    base = chain[:, 0] if cut_x is None else np.asarray(cut_x, float)
+    base = chain[:, 0] if cut_columns is None else np.asarray(cut_columns, float)
     at = base[[int(round(i * (len(base) - 1) / PIECES)) for i in range(1, PIECES)]]
     cuts, used = [], set()
     for k in sorted({int(np.argmin(np.abs(chain[:, 0] - x))) for x in at}):
