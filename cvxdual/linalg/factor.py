@@ -1,10 +1,11 @@
-"""Sparse symmetric positive definite factorisation, with the backend chosen by size.
+"""Sparse symmetric positive definite factorisation, with the backend chosen by what loads and by size.
 
-Measured on the stiffness of the built-in scenes (reports/speed.md, "Time and memory against
-size"): below a few thousand unknowns SciPy's SuperLU (symmetric mode) factors in 0.2-5 ms with
-no library start-up. Above, CHOLMOD (supernodal Cholesky, through CVXOPT) and MKL Pardiso
-(through ``pypardiso``, x86-64 wheels) are 2-4 times faster than SuperLU; on one thread CHOLMOD
-is 1.4 times faster than Pardiso, on two they are within 10%, so CHOLMOD is preferred. Pardiso is
+CHOLMOD (supernodal Cholesky, through CVXOPT) factors every size fastest where it loads: 1.6 to 3.7
+times faster than SciPy's SuperLU (symmetric mode) on every matrix of real runs from 53 to 15 000
+unknowns (reports/factor_small.md; its import costs a process 6 ms), 2-4 times above
+(reports/speed.md, "Time and memory against size"). Where CVXOPT cannot be loaded, SuperLU
+factors the small systems and MKL Pardiso (through ``pypardiso``, x86-64 wheels; on one thread
+CHOLMOD is 1.4 times faster than it, on two they are within 10%) the large ones. Pardiso is
 imported on first use only, with MKL's runtime named to ``pypardiso`` beforehand: left to itself
 it searches the whole environment for it by a recursive file search (0.1-0.2 s) at import and
 again for every new solver. SuperLU serves every size where neither can be loaded.
@@ -27,8 +28,8 @@ import scipy.sparse.linalg as spla
 from ..errors import SolverError
 from ..validate import one_line
 
-# below this many unknowns SuperLU beats CHOLMOD and Pardiso (their set-up and threads cost more
-# than the factorisation itself; level 2 of hertz, 2.4k unknowns: 2.6 ms against 4.2 ms)
+# without CHOLMOD: below this many unknowns SuperLU, not Pardiso (whose set-up and threads cost more
+# than the factorisation itself there)
 LARGE_FROM = 5000
 # a pivot below this fraction of the largest: singular to working precision (SPD stiffness
 # matrices of the scenes have pivot ratios above 1e-10; a floating mode gives <= 0)
@@ -61,10 +62,10 @@ def _has_cholmod() -> bool:
 
 def backend(n: int | None = None) -> str:
     """The backend used for ``n`` unknowns (the largest systems' choice if ``n`` is None)."""
-    if n is not None and n < LARGE_FROM:
-        return "superlu"
     if _has_cholmod():
         return "cholmod"
+    if n is not None and n < LARGE_FROM:
+        return "superlu"
     return "pardiso" if _pypardiso() is not None else "superlu"
 
 
