@@ -155,7 +155,7 @@ def cvx_worker(import_s: float, argv: list[str]) -> None:
     data, levels = Path(argv[0]), [int(v) for v in argv[1:]]
     scene = cvxdual.load_scene("hertz")
     t0 = time.perf_counter()
-    # level 3 is the first factored by the large backend (factor.LARGE_FROM): its start-up is paid here
+    # the warm-up pays the backend's start-up (CHOLMOD at every size; without it Pardiso from factor.LARGE_FROM)
     solve(scene, "type1", min(max(levels), 3), solver="fast", fallback=False)
     write_json(data / "cvx.json", {
         "import_s": import_s, "warmup_s": time.perf_counter() - t0, "threads": {k: os.environ.get(k) for k in THREADS},
