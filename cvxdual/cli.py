@@ -39,9 +39,7 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
     L, S = sol.scene.units
     c, r, t = s["contact"], s["residuals"], s["timings"]
     lines = [
-        f"scene {s['scene']}, {s['triangulation']}, "
-        + (f"level {s['level']}" if sol.adaptive is None else f"adaptive, cycle {sol.adaptive.chosen}")
-        + f": {s['n_pieces']} pieces, "
+        f"scene {s['scene']}, {s['triangulation']}, {sol.mesh_name}: {s['n_pieces']} pieces, "
         f"{s['n_stress_unknowns']} stress unknowns, {s['n_dofs']} dofs, {s['n_contact_pairs']} contact pairs",
         f"solver {s['solver']}: {s['status']}, iterations {s['iterations']}; time {t['total']:.2f} s "
         f"(mesh {t['mesh']:.2f}, assemble {t['assemble']:.2f}, build {t['build']:.2f}, "
@@ -84,8 +82,7 @@ def human_summary(sol, written=(), t_write: float | None = None) -> str:
                      + ("" if b["guaranteed"] else f" (not guaranteed: {'; '.join(b['reasons'])})"))
     if sol.adaptive is not None:
         h = sol.adaptive
-        state = "met" if h.met else f"not met, stopped: {h.stop.replace('_', ' ')}"
-        lines.append(f"adaptive: {len(h.cycles)} cycles to a certified {100 * h.tol:.3g} % ({state}); this is cycle "
+        lines.append(f"adaptive: {len(h.cycles)} cycles to a certified {100 * h.tol:.3g} % ({h.state}); this is cycle "
                      f"{h.chosen}: {h.cycles[h.chosen].pieces} pieces, {100 * h.cycles[h.chosen].bound_rel:.3g} %; "
                      f"{h.cycles[-1].elapsed:.2f} s in all")
     if written:

@@ -117,12 +117,11 @@ def solve(scene, triangulation: str = "type1", level: int | None = None, solver:
         with deadline.enforced():
             return _solve_to(deadline, scene, triangulation, level, solver, stress_space or Space.EQ, max_memory,
                              kinematic, tol, max_pieces, theta, warm_start)
-    if max_pieces is not None:
-        raise CvxdualError("max_pieces bounds a run to a tolerance: give tol too, or drop it",
-                           cli="--max-pieces bounds a run to a tolerance: give --tol too, or drop it")
-    if theta is not None:
-        raise CvxdualError("theta marks the cycles of a run to a tolerance: give tol too, or drop it",
-                           cli="--theta marks the cycles of a run to a tolerance: give --tol too, or drop it")
+    for name, value, does in (("max_pieces", max_pieces, "bounds"), ("theta", theta, "marks the cycles of")):
+        if value is not None:  # an option of a run to a tolerance, without tol
+            flag = "--" + name.replace("_", "-")
+            raise CvxdualError(f"{name} {does} a run to a tolerance: give tol too, or drop it",
+                               cli=f"{flag} {does} a run to a tolerance: give --tol too, or drop it")
     with deadline.enforced():  # from the start: the size probe's meshes count too
         return _solve(deadline, scene, triangulation, level, solver, check, warm_start, stress_space or Space.P0,
                       bounds, max_memory, fallback, verbose, kinematic, solver_options)

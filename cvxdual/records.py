@@ -312,5 +312,10 @@ class AdaptiveHistory(Record):
     chosen: int
     cycles: tuple
 
+    @property
+    def state(self) -> str:
+        """``"met"``, or ``"not met, stopped: ..."`` with the reason in words."""
+        return "met" if self.met else f"not met, stopped: {self.stop.replace('_', ' ')}"
+
     def as_dict(self) -> dict:
         return {**{k: v for k, v in self.items() if k != "cycles"}, "cycles": [c.as_dict() for c in self.cycles]}

@@ -63,8 +63,12 @@ def estimate(scene, level: int, fast: bool, stress_space: str = "p0", bounds: bo
              kinematic: str = "p2") -> Estimate:
     """Estimated triangles, nodes and peak memory of solving ``scene`` at ``level``."""
     n = mesh_size(scene, level, column_breaks(scene))
+    return _estimate(n["triangles"], n["nodes"], stress_space, fast, bounds, kinematic)
+
+
+def _estimate(triangles: float, nodes: float, stress_space, fast: bool, bounds: bool, kinematic) -> Estimate:
     cost = sum(BYTES_PER_TRIANGLE[r] for r in _rows(stress_space, fast, bounds, kinematic))
-    return Estimate(n["triangles"], n["nodes"], BASE_BYTES + cost * n["triangles"])
+    return Estimate(triangles, nodes, BASE_BYTES + cost * triangles)
 
 
 def _rows(stress_space, fast: bool, bounds: bool, kinematic) -> tuple[str, ...]:
@@ -89,8 +93,7 @@ def check_mesh_size(n_triangles: float, fast: bool, stress_space: str, bounds: b
                     max_memory=None) -> Estimate:
     """The estimate of a run on a mesh of ``n_triangles`` (an adaptive cycle's, counted from its grid),
     or :class:`~cvxdual.errors.TooLargeError` above the limit."""
-    cost = sum(BYTES_PER_TRIANGLE[r] for r in _rows(stress_space, fast, bounds, kinematic))
-    est = Estimate(n_triangles, 0.5 * n_triangles, BASE_BYTES + cost * n_triangles)
+    est = _estimate(n_triangles, 0.5 * n_triangles, stress_space, fast, bounds, kinematic)
     limit = memory_limit(max_memory)[0]
     if est.bytes > limit:
         raise TooLargeError(f"a mesh of {est.describe()} is more than the memory limit ({_bytes(limit)})")

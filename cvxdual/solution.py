@@ -147,6 +147,11 @@ class Solution:
     adaptive: object | None = None  # a run to a tolerance: its AdaptiveHistory (cvxdual.adapt)
 
     @property
+    def mesh_name(self) -> str:
+        """The mesh in words: its level, or the cycle of a run to a tolerance."""
+        return f"level {self.level}" if self.adaptive is None else f"adaptive, cycle {self.adaptive.chosen}"
+
+    @property
     def stress_space(self) -> Space:
         """The space of the stress field."""
         return self.field.space_name

@@ -210,7 +210,7 @@ def stress_figure(sol):
     from .maps import Measure, plot_stress
     draws = [lambda ax, cax, side, m=m: plot_stress(sol, m, ax=ax, cax=cax, insets=True, side=side)
              for m in (Measure.S22, Measure.SHEAR)]
-    return _maps(sol, draws, f"{sol.scene.name}, {_mesh_name(sol)}, {_describe(sol)}{_zone_note(sol)}")
+    return _maps(sol, draws, f"{sol.scene.name}, {sol.mesh_name}, {_describe(sol)}{_zone_note(sol)}")
 
 
 def von_mises_figure(sol):
@@ -220,7 +220,7 @@ def von_mises_figure(sol):
     s33 = "s33 = nu (s11 + s22)" if plane == "strain" else "s33 = 0"
     return _maps(sol, [lambda ax, cax, side: plot_stress(sol, Measure.VON_MISES, ax=ax, cax=cax, insets=True,
                                                               side=side)],
-                 f"{sol.scene.name}, {_mesh_name(sol)}, {_describe(sol)}: von Mises stress, plane {plane} "
+                 f"{sol.scene.name}, {sol.mesh_name}, {_describe(sol)}: von Mises stress, plane {plane} "
                  f"({s33}){_zone_note(sol)}")
 
 
@@ -236,7 +236,7 @@ def principal_figure(sol):
                                        for m in (Measure.PRINCIPAL_1, Measure.PRINCIPAL_2)]))
     draws = [lambda ax, cax, side, m=m: plot_stress(sol, m, ax=ax, cax=cax, insets=True, norm=norm, side=side)
              for m in (Measure.PRINCIPAL_1, Measure.PRINCIPAL_2)]
-    return _maps(sol, draws, f"{sol.scene.name}, {_mesh_name(sol)}, {_describe(sol)}: principal stresses, "
+    return _maps(sol, draws, f"{sol.scene.name}, {sol.mesh_name}, {_describe(sol)}: principal stresses, "
                  f"one colour scale{_zone_note(sol)}")
 
 
@@ -248,7 +248,7 @@ def displacement_figure(sol):
              for c in (DisplacementComponent.MAGNITUDE, DisplacementComponent.UY)]
     what = ("the bounds' admissible displacement v_h (linear on the mesh)" if is_equilibrium(sol)
             else "displacement, linear on the mesh")
-    return _maps(sol, draws, f"{sol.scene.name}, {_mesh_name(sol)}, {_describe(sol)}: {what}, drawn on the "
+    return _maps(sol, draws, f"{sol.scene.name}, {sol.mesh_name}, {_describe(sol)}: {what}, drawn on the "
                  "undeformed bodies")
 
 
@@ -256,7 +256,7 @@ def mesh_figure(sol):
     """The mesh the stresses live on, with insets on the contact zone and the finest part."""
     from .maps import plot_mesh
     return _maps(sol, [lambda ax, cax, side: plot_mesh(sol, ax=ax, insets=True, side=side)],
-                 f"{sol.scene.name}, {_mesh_name(sol)}, {_describe(sol)}", colorbar=False)
+                 f"{sol.scene.name}, {sol.mesh_name}, {_describe(sol)}", colorbar=False)
 
 
 def deformed_figure(sol):
@@ -264,7 +264,7 @@ def deformed_figure(sol):
     from matplotlib.figure import Figure
 
     from .plots import is_equilibrium, plot_deformed, plot_gap
-    title = f"{sol.scene.name}, {_mesh_name(sol)}: the contact zone"
+    title = f"{sol.scene.name}, {sol.mesh_name}: the contact zone"
     if is_equilibrium(sol):
         title += ("; stress space eq: the displacement drawn is the bounds' admissible v_h, whose opening "
                   "where the pressure acts is counted in G")
@@ -326,7 +326,7 @@ def bounds_figure(sol):
     beyond = float(b["contributions"].get("continuation", np.zeros(0)).sum())
     energy = f"{S}\u00b7{L}\u00b2"
     space = "stress space eq" if is_equilibrium(sol) else f"p0 ({sol.triangulation}) certified against eq"
-    title = (f"{sol.scene.name}, {_mesh_name(sol)}, {space}: G = {b['gap']:.3g} {energy} per unit thickness "
+    title = (f"{sol.scene.name}, {sol.mesh_name}, {space}: G = {b['gap']:.3g} {energy} per unit thickness "
              f"(contact edges {contact:.3g}" + (f", beyond the free arcs {beyond:.3g}" if beyond else "")
              + f"); error bound \u221a(2G) = {b['error_bound']:.3g} \u221a({energy})")
     lines = wrap_title(title, width - 0.3)
@@ -339,11 +339,6 @@ def bounds_figure(sol):
     return fig
 
 
-def _mesh_name(sol) -> str:
-    """The mesh in a title: its level, or the cycles of a run to a tolerance."""
-    return f"level {sol.level}" if sol.adaptive is None else f"adaptive, cycle {sol.adaptive.chosen}"
-
-
 def cycles_figure(sol):
     """A run to a tolerance: the certified error of its cycles against their pieces."""
     from matplotlib.figure import Figure
@@ -352,8 +347,7 @@ def cycles_figure(sol):
     h = sol.adaptive
     fig = Figure(figsize=(6.0, 4.5))
     plot_cycles(h, ax=fig.add_axes(_rect(fig, 0.9, 0.7, 6.0 - 0.9 - 0.25, 4.5 - 0.7 - BOTTOM)))
-    state = "met" if h.met else f"not met ({h.stop.replace('_', ' ')})"
-    _title(fig, wrap_title(f"{sol.scene.name}: {len(h.cycles)} cycles to a certified {100 * h.tol:.3g} %, {state}",
+    _title(fig, wrap_title(f"{sol.scene.name}: {len(h.cycles)} cycles to a certified {100 * h.tol:.3g} %, {h.state}",
                            5.7))
     return fig
 
