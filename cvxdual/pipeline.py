@@ -213,10 +213,11 @@ def _solve_to(deadline, scene, triangulation, level, solver, stress_space, max_m
         check_size(scene, plan.level, solver == FAST, space.name, True, max_memory, kinematic)
     certify = (lambda sol: sol) if space.certifies else partial(_bounds_of, kinematic=kinematic, deadline=deadline)
     sol = refine_to_tolerance(
-        lambda grid: space.run(scene, triangulation, grid, solver, warm_start=warm_start, deadline=deadline),
+        lambda grid: space.run(scene, triangulation, grid, solver, warm_start=warm_start, deadline=deadline,
+                               exact_error=False),
         certify, scene, plan, deadline,
         partial(check_mesh_size, fast=solver == FAST, stress_space=space.name, bounds=True, kinematic=kinematic,
-                max_memory=max_memory))
+                max_memory=max_memory), finish=space.with_exact_error)
     return _gmsh_timed(sol, scene, gmsh0)
 
 

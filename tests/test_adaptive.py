@@ -190,6 +190,40 @@ def test_tolerance_met_and_brackets_meet_every_uniform_level():
     assert json.loads(json.dumps(sol.summary()["adaptive"]))["cycles"][-1]["bound_rel"] == h.cycles[-1].bound_rel
 
 
+@pytest.mark.parametrize("space", ["eq", "p0"])
+def test_error_left_out_and_added_back_is_the_runs_own(space):
+    """A cycle leaves the error against the exact field out; added to the solution kept it is the
+    error a whole run on that mesh gives (the same computation: equal to the last bit)."""
+    scene = outline_scene(as_scene("hertz"))
+    st = space_of(space)
+    grid = _refined_grids(scene, 1, seed=5)[0]
+    whole = st.run(scene, "type1", grid, "FAST")
+    bare = st.run(scene, "type1", grid, "FAST", exact_error=False)
+    assert whole.error is not None and bare.error is None
+    added = st.with_exact_error(bare)
+    assert added.error == whole.error
+    # its time is booked where a whole run books it: error, and within recover and total
+    dt = added.timings["error"] - bare.timings["error"]
+    assert dt > 0
+    assert all(added.timings[k] - bare.timings[k] == pytest.approx(dt, rel=1e-9) for k in ("recover", "total"))
+
+
+def test_a_run_to_a_tolerance_computes_the_exact_error_once(monkeypatch):
+    """The error against the exact field (3-4 s a cycle on rounded-punch-linear at 7000 pieces) is
+    computed for the solution returned only, met or not."""
+    import cvxdual.eq.run as eq_run
+
+    calls = []
+    monkeypatch.setattr(eq_run, "exact_errors", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = __import__("cvxdual.eq.bounds", fromlist=["exact_errors"]).exact_errors
+    sol = cvxdual.solve("hertz", tol=0.03)
+    assert len(sol.adaptive.cycles) >= 3 and len(calls) == 1 and sol.error is not None
+    assert sol.error["combined"] <= sol.bounds["error_bound"]  # the bound dominates the true error
+    with pytest.raises(ToleranceError) as e:
+        cvxdual.solve("hertz", tol=0.001, max_pieces=1500)
+    assert len(calls) == 2 and e.value.solution.error is not None
+
+
 def test_unmet_tolerance_raises_with_the_best():
     with pytest.raises(ToleranceError, match="max_pieces") as e:
         cvxdual.solve("cylinder-on-block", tol=0.001, max_pieces=2000)

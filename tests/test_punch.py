@@ -40,6 +40,33 @@ def test_flamant_superposition_is_mcewen():
         assert np.abs(got - want).max() <= 1e-8 * HERTZ.p0
 
 
+def test_flamant_superposition_of_a_flat_punch_against_adaptive_quadrature():
+    """The field under the rounded flat punch (b > 0, where the pressure's slope is logarithmic at
+    |t| = b) against Flamant's integral in t by QUADPACK, breaking at +-b and at the point: from just
+    under the surface to deep, beside and below the corners and the contact's ends. 1e-9 p(0): the
+    largest gap measured is 4.8e-10 p(0), 1e-6 beside a corner and 1e-3 deep, where the kernel's peak
+    and the logarithmic slope meet (the same with the pressure of punch_pressure in the sum); a
+    pressure off by 1e-4 of one of its terms fails it."""
+    d = punch_contact(3.0, 20.0, HERTZ.E_star, 32000.0)
+    p0 = float(punch_pressure(np.array([0.0]), d)[0])
+    pts = [(x, z) for x in (0.0, 1.5, d.b - 1e-6, d.b, d.b + 0.3, 0.99 * d.a, d.a + 0.5, -4.0)
+           for z in (1e-3, 0.05, 0.7, 4.0)]
+
+    def flamant(x, z, m):
+        def f(t):  # sigma_x, sigma_z, tau_xz of the line load p(t) dt
+            r = x - t
+            kernel = (r * r * z, z**3, r * z * z)[m]
+            return -2.0 / np.pi * float(punch_pressure(np.array([t]), d)[0]) * kernel / (r * r + z * z) ** 2
+
+        breaks = sorted({-d.b, d.b, min(max(x, -d.a), d.a)} - {-d.a, d.a})
+        return quad(f, -d.a, d.a, points=breaks, limit=500, epsabs=1e-10 * p0, epsrel=1e-12)[0]
+
+    x, z = np.array(pts).T
+    got = punch_body_stress(x, z, d, 0.0, 0.0, upper=True)  # upper body: depth y, s12 = tau_xz
+    want = np.array([[flamant(xi, zi, m) for m in range(3)] for xi, zi in pts])
+    assert np.abs(got - want).max() <= 1e-9 * p0
+
+
 @pytest.mark.parametrize("b", [1.0, 3.0, 5.0])
 def test_pressure_carries_the_load(b):
     """``int p = P`` (adaptive quadrature, 1e-9: its own tolerance), the pressure is positive

@@ -2,8 +2,9 @@
 
 Each cycle is a whole run on an adaptive :class:`~cvxdual.geometry.grid.Grid` (the P1 fast path,
 the equilibrium stresses, the kinematic side's certificate), warm-started from the last cycle's
-contact set. The loop stops when ``sqrt(2 G)`` relative to the stress's energy norm is at most
-the tolerance; before a cycle that would exceed ``max_pieces`` or the memory limit, past the time
+contact set; the error against an exact field, which no cycle needs, is left to the solution
+kept. The loop stops when ``sqrt(2 G)`` relative to the stress's energy norm is at most the
+tolerance; before a cycle that would exceed ``max_pieces`` or the memory limit, past the time
 limit, or when nothing is left to refine, it stops with :class:`~cvxdual.errors.ToleranceError`,
 which carries the best certified solution so far.
 """
@@ -51,10 +52,11 @@ def first_cycle(solve, scene, level: int | None):
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, memory_rows):
+def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, memory_rows, finish=lambda sol: sol):
     """The cycles: ``run(grid)`` solves on a grid, ``certify(sol)`` gives it bounds where its space
     does not; ``memory_rows(n_triangles)`` refuses a cycle too large for memory
-    (:func:`~cvxdual.sizing.check_mesh_size`). Returns the solution with its
+    (:func:`~cvxdual.sizing.check_mesh_size`); ``finish(sol)`` completes the one solution kept (what
+    no cycle needs: the error against an exact field). Returns the solution with its
     :class:`~cvxdual.records.AdaptiveHistory`, or raises :class:`ToleranceError` with the best."""
     t0 = time.perf_counter()
     grid = None
@@ -113,7 +115,7 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
         grid = nxt
     history = AdaptiveHistory(tol=float(plan.tol), theta=float(plan.theta), met=stop is Stop.TOLERANCE, stop=stop,
                               chosen=best[2], cycles=tuple(cycles))
-    sol = replace(best[0], adaptive=history)
+    sol = replace(finish(best[0]), adaptive=history)
     if stop is not Stop.TOLERANCE:
         raise _unmet(sol, best[1], plan, stop)
     return sol

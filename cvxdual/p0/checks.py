@@ -154,19 +154,20 @@ def duality_gap(system: System, t: np.ndarray, u: np.ndarray, extra: float = 0.0
 
 
 def evaluate(system: System, t: np.ndarray, u: np.ndarray, stats: SolverStats, friction=None, adhesion=None,
-             displacements: bool = True) -> dict:
+             displacements: bool = True, exact_error: bool = True) -> dict:
     """Contact data, residuals, objective, duality gap and errors of stresses ``t`` and
     displacements ``u``: every field of a :class:`Solution` that the solve itself does not give,
-    and ``timings["error"]``, the time of the error against the exact field (``friction``,
-    ``adhesion``, ``displacements``: see :func:`contact_quantities`). Where the scene declares an
-    exact field that does not solve it, ``exact`` and ``error`` are ``None`` and ``checks`` says why."""
+    and ``timings["error"]``, the time of the error against the exact field (left out unless
+    ``exact_error``; ``friction``, ``adhesion``, ``displacements``: see :func:`contact_quantities`).
+    Where the scene declares an exact field that does not solve it, ``exact`` and ``error`` are
+    ``None`` and ``checks`` says why."""
     scene = system.mesh.scene
     adm = admissibility(system, t)
     contact = contact_quantities(system, adm[0], u, friction, adhesion, displacements)
     res = residuals(system, t, u, contact, adm)
     exact, why = exact_reference(scene)
     error, t0 = None, time.perf_counter()
-    if exact is not None:
+    if exact is not None and exact_error:
         error = stress_error(system, t, exact.stress)
     return {"timings": {"error": time.perf_counter() - t0},  # a diagnostic: shown apart
             "scene": scene, "system": system, "stress": t, "displacement": u.reshape(-1, 2), "solver": stats,

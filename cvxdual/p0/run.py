@@ -23,7 +23,7 @@ from ..system.field import PieceField
 from ..system.stress_space import Solved, StressSpace
 from ..system.warm_start import warm_start_pairs
 from .checks import evaluate
-from .norms import stress_error
+from .norms import DEFAULT_QUAD, stress_error
 
 
 def dual_model(system: System, triangulation: str, limit_analysis: bool = False):
@@ -55,8 +55,8 @@ class P0Stresses(StressSpace):
     def model(self, system: System, triangulation: str, limit_analysis: bool = False):
         return dual_model(system, triangulation, limit_analysis)
 
-    def exact_error(self, sol: Solution, exact, rule: int):
-        return stress_error(sol.system, sol.stress, exact.stress, rule)
+    def exact_error(self, sol: Solution, exact, rule: int | None = None):
+        return stress_error(sol.system, sol.stress, exact.stress, DEFAULT_QUAD if rule is None else rule)
 
     def zero(self, system: System, built):
         return np.zeros((system.n_pieces, 3)), None
@@ -91,8 +91,8 @@ class P0Stresses(StressSpace):
         own = model.solution(check=False) if scene.friction is not None else None
         return Solved(model.stresses(), model.displacements(), stats, build_time=build, solution=own)
 
-    def recover(self, scene, triangulation, level, system, built, solved):
-        fields = evaluate(system, solved.stress, solved.u, solved.stats)
+    def recover(self, scene, triangulation, level, system, built, solved, exact_error=True):
+        fields = evaluate(system, solved.stress, solved.u, solved.stats, exact_error=exact_error)
         t_error = fields.pop("timings")["error"]
         return Solution(triangulation=triangulation, level=int(level), timings={},
                         field=PieceField.of_system(system, fields.pop("stress")), **fields), t_error

@@ -23,6 +23,7 @@ from ..geometry.grid import Grid
 from ..geometry.triangulation import discretize
 from ..kinds import Space, Status
 from ..progress import Deadline, phase
+from ..reference.exact import exact_reference
 from ..solution import Solution, SolverStats, check_solution
 from .assembly import System, assemble
 from .displacement import NOTHING_ACTS, nothing_acts
@@ -54,10 +55,12 @@ class StressSpace(ABC):
 
     def run(self, scene, triangulation: str, level: int | Grid, solver: str, check: bool = True,
             warm_start: bool = True, deadline: Deadline | None = None, verbose: bool = False,
-            **solver_options) -> Solution:
+            exact_error: bool = True, **solver_options) -> Solution:
         """Mesh, assemble, build, solve with ``solver`` (warm-started from level ``level - 2``, or on an
         adaptive :class:`~cvxdual.geometry.grid.Grid` from its last cycle, unless ``warm_start`` is
-        false), recover and (unless ``check`` is false) check."""
+        false), recover and (unless ``check`` is false) check. ``exact_error`` false leaves the error
+        against the scene's exact field out (a cycle of a run to a tolerance: :meth:`with_exact_error`
+        adds it to the one solution returned)."""
         deadline = deadline or Deadline()
         t0 = time.perf_counter()
         with phase("mesh", deadline) as p:
@@ -80,7 +83,7 @@ class StressSpace(ABC):
         t3 = time.perf_counter()
         with phase("recover", deadline) as p:
             sol, t_error = (solved.solution, 0.0) if solved.solution is not None else \
-                self.recover(scene, triangulation, system.mesh.level, system, built, solved)
+                self.recover(scene, triangulation, system.mesh.level, system, built, solved, exact_error)
             p.detail = self.recovered(sol)
         t4 = time.perf_counter()
         sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": solved.build_time,
@@ -109,8 +112,9 @@ class StressSpace(ABC):
 
     @abstractmethod
     def recover(self, scene, triangulation: str, level: int, system: System, built,
-                solved: Solved) -> tuple[Solution, float]:
-        """The solution (timings left empty) and the seconds its error against an exact field took."""
+                solved: Solved, exact_error: bool = True) -> tuple[Solution, float]:
+        """The solution (timings left empty) and the seconds its error against an exact field took
+        (none unless ``exact_error``)."""
 
     def recovered(self, sol: Solution) -> str:
         """The progress line of the ``recover`` phase."""
@@ -125,9 +129,21 @@ class StressSpace(ABC):
         """The space's CVXPY model of ``system``, built, not solved."""
 
     @abstractmethod
-    def exact_error(self, sol: Solution, exact, rule: int):
+    def exact_error(self, sol: Solution, exact, rule: int | None = None):
         """The error of ``sol``'s stresses against the exact field ``exact`` with ``rule*rule`` Gauss
-        points per cell: the definition the run's own ``error`` uses (at its default rule)."""
+        points per cell: the definition the run's own ``error`` uses (at its default rule, ``None``)."""
+
+    def with_exact_error(self, sol: Solution) -> Solution:
+        """``sol`` (run with ``exact_error`` false) with its error against the scene's exact field, as
+        its run would have given it, the time added to its ``error``, ``recover`` and ``total``."""
+        exact, _ = exact_reference(sol.scene)
+        if exact is None or sol.error is not None:
+            return sol
+        t0 = time.perf_counter()
+        error = self.exact_error(sol, exact)
+        dt = time.perf_counter() - t0
+        timings = {**sol.timings, **{k: sol.timings[k] + dt for k in ("error", "recover", "total")}}
+        return replace(sol, error=error, timings=timings)
 
     def certify(self, sol: Solution) -> Solution:
         """``sol`` with certified bounds of its displacement, where the space can give them."""
