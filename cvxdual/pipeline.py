@@ -209,15 +209,15 @@ def _solve_to(deadline, scene, triangulation, level, solver, stress_space, max_m
                                "solve at a --level without --tol")
     solver = resolve_solver(FAST if solver is None else solver)
     deadline.fast = solver == FAST
-    if plan.level is not None:
-        check_size(scene, plan.level, solver == FAST, space.name, True, max_memory, kinematic)
     certify = (lambda sol: sol) if space.certifies else partial(_bounds_of, kinematic=kinematic, deadline=deadline)
     sol = refine_to_tolerance(
         lambda grid: space.run(scene, triangulation, grid, solver, warm_start=warm_start, deadline=deadline,
                                exact_error=False),
         certify, scene, plan, deadline,
         partial(check_mesh_size, fast=solver == FAST, stress_space=space.name, bounds=True, kinematic=kinematic,
-                max_memory=max_memory), finish=space.with_exact_error)
+                max_memory=max_memory),
+        lambda level: check_size(scene, level, solver == FAST, space.name, True, max_memory, kinematic),
+        finish=space.with_exact_error)
     return _gmsh_timed(sol, scene, gmsh0)
 
 

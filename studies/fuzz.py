@@ -4,8 +4,10 @@
 
 Until the time budget ends, random cases (a built-in scene perturbed by fuzzing.perturb,
 a level, a triangulation, the fast path or CLARABEL, sometimes stress space "eq" on flat-face
-scenes) run through cvxdual.solve, each in a worker process with a time limit (a hang or a
-killed worker costs one case) and an address-space limit (a huge mesh raises MemoryError
+scenes; a fifth of the cases a run to a certified 5 % instead of a level, capped at
+:data:`TOL_PIECES` pieces, whose best result is checked too when it stops short) run through
+cvxdual.solve, each in a worker process with a time limit (a hang or a killed worker costs one
+case) and an address-space limit (a huge mesh raises MemoryError
 instead of exhausting the machine). Outcomes: ok, rejected:<CvxdualError subclass>, timeout,
 fallback (the fast path failed and solve() handed over to CLARABEL, which solved), and the
 findings: exception:<type> (any other exception; traceback saved), nan (a returned result fails
@@ -38,11 +40,16 @@ from cvxdual.files import write_text
 from cvxdual.scene.scenefile import builtin_data, builtin_names, load_scene
 
 HOSTILITY = (0.0, 0.0, 0.1, 0.3, 1.0)  # most cases plausible, so that many reach the solvers
+TOL, TOL_SHARE, TOL_PIECES = 0.05, 0.2, 20_000  # runs to a tolerance: the adaptive path's input handling
 NOT_FINDINGS = ("ok", "rejected", "timeout", "fallback")
 
 
 def solve(data: dict, case: dict, solver: str):
-    return cd.solve(load_scene(data), case["triangulation"], case["level"], solver, stress_space=case["stress_space"])
+    if case.get("tol") is None:
+        return cd.solve(load_scene(data), case["triangulation"], case["level"], solver,
+                        stress_space=case["stress_space"])
+    return cd.solve(load_scene(data), case["triangulation"], None, solver, stress_space=case["stress_space"],
+                    tol=case["tol"], max_pieces=TOL_PIECES)
 
 
 def run_case(case: dict) -> dict:
@@ -60,7 +67,10 @@ def run_case(case: dict) -> dict:
     except cd.CvxdualError as e:
         msg = str(e)
         out.update(outcome=f"rejected:{type(e).__name__}", detail=msg.splitlines()[0][:300] if msg else "")
-        if isinstance(e.__context__, MemoryError):  # the size check let through a run that does not fit
+        best = getattr(e, "solution", None)  # a run to a tolerance that stopped short: its best result
+        if best is not None and (problems := check_result(best)):
+            out.update(outcome="bad-result", detail="(best result) " + "; ".join(problems)[:280])
+        elif isinstance(e.__context__, MemoryError):  # the size check let through a run that does not fit
             out.update(outcome="out-of-memory", detail=f"{type(e).__name__} after MemoryError: {msg[:250]}")
         elif "\n" in msg or len(msg) >= 500:
             out.update(outcome="bad-message", detail=f"{type(e).__name__} of {len(msg)} chars: {msg[:300]!r}")
@@ -116,14 +126,18 @@ class Worker:
 
 def cases(seed: int, levels: list[int]):
     rng = np.random.default_rng(seed)
+    tol_rng = np.random.default_rng([seed, 42])  # apart, so that the level cases stay those of earlier runs
     names = builtin_names()
     flat = {n for n in names if all(b["face"]["kind"] == "flat" for b in builtin_data(n)["bodies"].values())}
     for i in range(sys.maxsize):
         scene = names[rng.integers(len(names))]
-        yield {"id": i, "scene": scene, "seed": int(rng.integers(2**32)),
-               "hostility": HOSTILITY[rng.integers(len(HOSTILITY))], "level": int(rng.choice(levels)),
-               "triangulation": str(rng.choice(["type1", "type2"])), "solver": str(rng.choice(["fast", "CLARABEL"])),
-               "stress_space": "eq" if scene in flat and rng.random() < 0.25 else "p0"}
+        case = {"id": i, "scene": scene, "seed": int(rng.integers(2**32)),
+                "hostility": HOSTILITY[rng.integers(len(HOSTILITY))], "level": int(rng.choice(levels)),
+                "triangulation": str(rng.choice(["type1", "type2"])), "solver": str(rng.choice(["fast", "CLARABEL"])),
+                "stress_space": "eq" if scene in flat and rng.random() < 0.25 else "p0", "tol": None}
+        if tol_rng.random() < TOL_SHARE:  # from its first cycle's level, in the equilibrium space (tol's default)
+            case.update(level=None, stress_space="eq", tol=TOL)
+        yield case
 
 
 def fuzz(minutes: float, levels: list[int], seed: int, n_workers: int, timeout: float, memory: int,
@@ -199,8 +213,9 @@ def cases_md(rows: list[dict]) -> list[str]:
         r = rs[0]
         data = perturb(builtin_data(r["scene"]), np.random.default_rng(r["seed"]), r["hostility"])
         md += [f"### {key} ({len(rs)} cases: {', '.join(str(x['id']) for x in rs[:20])})", "",
-               f"- case {r['id']}: scene `{r['scene']}` seed {r['seed']} hostility {r['hostility']}, level "
-               f"{r['level']}, {r['triangulation']}, solver {r['solver']}, stress space {r['stress_space']}",
+               f"- case {r['id']}: scene `{r['scene']}` seed {r['seed']} hostility {r['hostility']}, "
+               + (f"to tol {r['tol']:g}" if r.get("tol") else f"level {r['level']}")
+               + f", {r['triangulation']}, solver {r['solver']}, stress space {r['stress_space']}",
                f"- error: {r['detail']}", "- changes to the built-in scene:", "",
                *[f"      {line}" for line in diff(builtin_data(r["scene"]), data)], ""]
         if r["traceback"]:
@@ -217,8 +232,8 @@ def table(counter: dict, title: str) -> list[str]:
 def report(rows: list[dict], out: Path, args) -> list[dict]:
     findings = [r for r in rows if r["outcome"].split(":")[0] not in NOT_FINDINGS]
     out.mkdir(parents=True, exist_ok=True)
-    fields = ["id", "scene", "seed", "hostility", "level", "triangulation", "solver", "stress_space", "outcome",
-              "seconds", "detail"]
+    fields = ["id", "scene", "seed", "hostility", "level", "tol", "triangulation", "solver", "stress_space",
+              "outcome", "seconds", "detail"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fields, extrasaction="ignore")
     w.writeheader()
@@ -227,7 +242,8 @@ def report(rows: list[dict], out: Path, args) -> list[dict]:
     by = {k: collections.defaultdict(collections.Counter) for k in ("scene", "solver", "level")}
     for r in rows:
         for k in ("scene", "solver", "level"):
-            by[k][f"{r[k]}"][r["outcome"].split(":")[0]] += 1
+            v = r[k] if k != "level" or r["tol"] is None else f"tol {r['tol']:g}"  # a run to a tolerance
+            by[k][f"{v}"][r["outcome"].split(":")[0]] += 1
     md = ["# Fuzzing of the built-in scenes\n",
           f"`python studies/fuzz.py --minutes {args.minutes:g} --levels {' '.join(map(str, args.levels))} "
           f"--seed {args.seed}`: {len(rows)} cases, {len(findings)} findings.\n", "| outcome | cases |", "|---|---|"]

@@ -21,6 +21,7 @@ from cvxdual.geometry.triangulation import discretize, uniform_grid
 from cvxdual.pipeline import as_scene, build_system, space_of
 from cvxdual.reference.exact import exact_reference
 from cvxdual.scene.scene import BoundaryPart, Traction
+from cvxdual.scene.scenefile import builtin_data, load_scene
 
 # two exact computations of the same region's area (curved pieces integrated exactly): rounding only
 AREA_RTOL = 1e-10
@@ -222,6 +223,45 @@ def test_a_run_to_a_tolerance_computes_the_exact_error_once(monkeypatch):
     with pytest.raises(ToleranceError) as e:
         cvxdual.solve("hertz", tol=0.001, max_pieces=1500)
     assert len(calls) == 2 and e.value.solution.error is not None
+
+
+def test_vanishing_stresses_are_refused_not_certified(tmp_path, capsys):
+    """cylinder-in-groove with the groove's push held by a support on the same side: no contact force,
+    zero equilibrium stresses, yet G > 0 (the chords of the touching faces overlap, so the certificate's
+    displacement must move). A relative error has nothing to be relative to: one line, no output
+    (a run had reported a certified 0 % here)."""
+    data = builtin_data("cylinder-in-groove")
+    data["bodies"]["groove"]["boundary"]["right"]["on"] = "far"
+    scene = load_scene(data)
+    level0 = cvxdual.solve(scene, "type2", 0, stress_space="eq")
+    assert level0.bounds["error_bound_rel"] is None and level0.bounds["gap"] > 0.1
+    with pytest.raises(CvxdualError, match="stresses vanish.*nothing to be relative to"):
+        cvxdual.solve(scene, "type2", tol=0.05)
+    out = tmp_path / "run"
+    assert main(["solve", "--scene", "cylinder-in-groove", "--set", "bodies.groove.boundary.right.on=far",
+                 "--triangulation", "type2", "--tol", "5%", "--out", str(out), "--quiet"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "use --level instead of --tol" in err[0] and not out.exists()
+
+
+def test_a_zero_solution_meets_any_tolerance():
+    """Nothing loads blocks: the stresses and the bound vanish (to rounding), the run stops at its first
+    cycle with the tolerance met."""
+    data = builtin_data("blocks")
+    for body in data["bodies"].values():
+        for part in body.get("boundary", {}).values():
+            if part["kind"] == "traction":
+                part["traction"]["value"] = [0.0, 0.0]
+    sol = cvxdual.solve(load_scene(data), "type2", tol=0.01)
+    assert sol.adaptive.met and len(sol.adaptive.cycles) == 1 and sol.adaptive.cycles[0].bound_rel == 0.0
+    assert sol.bounds["error_bound_rel"] is None and np.abs(sol.stress).max() == 0.0
+
+
+def test_the_first_cycle_is_sized_before_it_is_meshed():
+    """A first cycle too large for the memory limit is refused before it is built, as a level is (a
+    perturbed scene with a far side 2500 times deeper had raised MemoryError in its first cycle)."""
+    with pytest.raises(cvxdual.TooLargeError, match="at level 0"):
+        cvxdual.solve("cylinder-on-block", tol=0.01, max_memory="1MB")
 
 
 def test_unmet_tolerance_raises_with_the_best():

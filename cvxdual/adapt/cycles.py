@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
-from ..errors import MeshError, TimeLimitError, ToleranceError, TooLargeError
+from ..errors import CvxdualError, MeshError, TimeLimitError, ToleranceError, TooLargeError
 from ..geometry.grid import Grid
 from ..geometry.triangulation import uniform_grid
 from ..kinds import Stop
@@ -22,6 +22,7 @@ from ..progress import Deadline, log, phase
 from ..records import AdaptiveHistory, Cycle
 from .marking import THETA, mark
 
+ZERO_GAP = 1e-12  # G below this many energy units (stress^2 length^2 / modulus) is rounding: a zero solution
 MAX_PIECES = 400_000  # the default cap: about 2.7 GB with the P2 certificate (sizing.BYTES_PER_TRIANGLE)
 START_LEVELS = 4  # the first cycle meshes at the lowest of levels 0-3 that the scene allows
 
@@ -37,12 +38,14 @@ class Plan:
     level: int | None = None
 
 
-def first_cycle(solve, scene, level: int | None):
+def first_cycle(solve, scene, level: int | None, check_level=lambda level: None):
     """The first cycle's grid and its solution ``solve(grid)``: at ``level``, or at the lowest level the
     scene meshes at (a coarse level may have too few contact pairs, or a face too curved for its first
-    layer; the solve's meshing is the test)."""
+    layer; the solve's meshing is the test); ``check_level(level)`` refuses a level too large for memory
+    before it is meshed (:func:`~cvxdual.sizing.check_size`)."""
     levels = [level] if level is not None else list(range(START_LEVELS))
     for lv in levels:
+        check_level(lv)
         grid = uniform_grid(scene, lv)
         try:
             return grid, solve(grid)
@@ -52,11 +55,13 @@ def first_cycle(solve, scene, level: int | None):
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, memory_rows, finish=lambda sol: sol):
+def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, memory_rows, check_level,
+                        finish=lambda sol: sol):
     """The cycles: ``run(grid)`` solves on a grid, ``certify(sol)`` gives it bounds where its space
-    does not; ``memory_rows(n_triangles)`` refuses a cycle too large for memory
-    (:func:`~cvxdual.sizing.check_mesh_size`); ``finish(sol)`` completes the one solution kept (what
-    no cycle needs: the error against an exact field). Returns the solution with its
+    does not; ``check_level(level)`` and ``memory_rows(n_triangles)`` refuse a first cycle and a later
+    one too large for memory (:func:`~cvxdual.sizing.check_size`, :func:`~cvxdual.sizing.check_mesh_size`);
+    ``finish(sol)`` completes the one solution kept (what no cycle needs: the error against an exact
+    field). Returns the solution with its
     :class:`~cvxdual.records.AdaptiveHistory`, or raises :class:`ToleranceError` with the best."""
     t0 = time.perf_counter()
     grid = None
@@ -68,11 +73,11 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
         try:
             with deadline.caught():
                 if grid is None:
-                    grid, sol = first_cycle(lambda g: certify(run(g)), scene, plan.level)
+                    grid, sol = first_cycle(lambda g: certify(run(g)), scene, plan.level, check_level)
                 else:
                     sol = certify(run(grid))
                 b = sol.bounds
-                rel = float(b["error_bound_rel"]) if b["error_bound_rel"] is not None else 0.0
+                rel = _relative_bound(sol, len(cycles))
                 met = rel <= plan.tol
                 marks = nxt = None
                 if not met:
@@ -119,6 +124,22 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
     if stop is not Stop.TOLERANCE:
         raise _unmet(sol, best[1], plan, stop)
     return sol
+
+
+def _relative_bound(sol, cycle: int) -> float:
+    """The cycle's certified relative error; where its stresses vanish, 0 if the bound does too (the
+    solution is zero, exactly), and otherwise a refusal: a relative error has nothing to be relative
+    to (a run that reported 0 % there had a bound of 0.33 in energy units, on a groove whose push went
+    into its own support)."""
+    b = sol.bounds
+    if b["error_bound_rel"] is not None:
+        return float(b["error_bound_rel"])
+    if b["gap"] <= ZERO_GAP * sol.system.scales.energy:
+        return 0.0
+    what = (f"the equilibrium stresses vanish on cycle {cycle}'s mesh (no contact force, and the supports hold "
+            f"every load) while the certified bound sqrt(2 G) is {b['error_bound']:.3g} (absolute): a relative "
+            "error has nothing to be relative to")
+    raise CvxdualError(f"{what}; solve at a level instead of to tol", cli=f"{what}; use --level instead of --tol")
 
 
 def _growth(old: Grid, new: Grid) -> float:

@@ -276,7 +276,11 @@ class HybridSolver:
         self.Hw_inv = np.empty((len(t), 9, 9))
         for lo in range(0, len(t), CHUNK):
             c = slice(lo, lo + CHUNK)
-            self.Hw_inv[c] = np.linalg.inv(reference_energy(self.ap[c], REF_ENERGY_DIVFREE))
+            try:
+                self.Hw_inv[c] = np.linalg.inv(reference_energy(self.ap[c], REF_ENERGY_DIVFREE))
+            except np.linalg.LinAlgError:  # a sliver's energy (the caller names it: eq.run.sliver_error)
+                raise SolverError("eq fast path: a triangle's energy matrix is singular; use the CVXPY path "
+                                  "(EquilibriumModel)") from None
         self.D = inverse2(sp_.coef[t])  # (n, 6, 2, 2): edge dofs of the reference parameters
 
     def _plain_base(self, c: slice, g: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

@@ -90,7 +90,7 @@ def punch_pressure(x, d: PunchData) -> np.ndarray:
 def _pressure_at(theta: np.ndarray, s: np.ndarray, c: np.ndarray, d: PunchData) -> np.ndarray:
     """:func:`punch_pressure` at ``t = a sin(theta)`` inside the contact, given ``s = |sin(theta)|``
     and ``c = cos(theta)`` (the quadrature has both): three transcendental functions where
-    :func:`punch_pressure` takes eleven (70 % of the field's time). With ``phi = |theta|``,
+    :func:`punch_pressure` takes eleven (it was 70 % of the field's time). With ``phi = |theta|``,
     ``sm = sin(phi - phi0)`` (directly: exact to rounding however near ``phi0``), ``sp = sin(phi + phi0)``
     by the addition formula (no cancellation) and ``tan((phi + phi0) / 2) tan((phi - phi0) / 2)
     = (cos(phi0) - cos(phi)) / (cos(phi0) + cos(phi)) = sm sp / (cos(phi0) + cos(phi))^2``."""

@@ -444,7 +444,7 @@ def _body(name: str, d: dict, plane: str) -> Body:
     elif "holes" in d and outline is None:
         raise SceneError(f"{where}: holes need an outline; give the body's outline too")
     return Body(name=name, position=_need(d, "position", where), x_range=_need(d, "x", where),
-                far=number(d["far"], f"{where}.far") if "far" in d or outline is None else None,
+                far=number(_need(d, "far", where), f"{where}.far") if "far" in d or outline is None else None,
                 face=face, outline=outline,
                 material=material, boundary=tuple(parts), body_force=d.get("body_force", (0.0, 0.0)),
                 layers=integer(d.get("layers", 4), f"{where}.layers"),

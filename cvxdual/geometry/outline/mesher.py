@@ -51,7 +51,10 @@ def mesh_rest(body, columns: np.ndarray, inner_y: np.ndarray, level: int, spots=
     levels; a run of two bodies meets each of them again."""
     columns, inner_y = np.asarray(columns, float), np.asarray(inner_y, float)
     spots = None if spots is None or not len(spots) else np.ascontiguousarray(spots, float).reshape(-1, 3).tobytes()
-    cuts = None if cut_columns is None else np.asarray(cut_columns, float).tobytes()
+    # cuts tried at the chain's own columns are the default's: one key, so that a run to a tolerance's first
+    # cycle finds the mesh its size check made
+    same = cut_columns is None or np.array_equal(np.asarray(cut_columns, float), columns)
+    cuts = None if same else np.asarray(cut_columns, float).tobytes()
     return _cached(body, columns.tobytes(), inner_y.tobytes(), int(level), spots, cuts)
 
 
