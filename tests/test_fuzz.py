@@ -75,6 +75,10 @@ def check_contract(data: dict, level: int, solver: str, triangulation: str = "ty
     ("wavy", {"bodies": {"waves": {"face": {"wavelength": 1e-3}}}}, 0, "fast", "p0"),
     # a body end 1.4e-4 from the other's: at level 2 a sliver's singular energy matrix (numpy's LinAlgError)
     ("patch", {"bodies": {"bottom": {"x": [0.00014104481146396387, 10.0]}}}, 2, "fast", "eq"),
+    # a circle gap narrower than the contact interval: clipped values, infinite curvature (ValueError in the
+    # P2 certificate's slack bound)
+    ("cylinder-in-groove", {"contact": {"gap": {"kind": "circle", "R": 9.2, "yc": 9.21, "branch": "upper"}}}, 0,
+     "fast", "eq"),
 ])
 def test_fuzz_findings(name, over, level, solver, stress_space):
     check_contract(merge(builtin_data(name), over), level, solver, stress_space=stress_space)

@@ -377,6 +377,11 @@ class Scene:
             raise SceneError(f"the contact interval [{a:g}, {b:g}] must lie in both bodies' x ranges "
                              f"(overlap [{ov[0]:g}, {ov[1]:g}])")
         object.__setattr__(self, "contact", (a, b))
+        if self.gap is not None:
+            lo_, hi_ = self.gap.domain()
+            if a < lo_ or b > hi_:  # a circle gap narrower than the interval: clipped values, infinite curvature
+                raise SceneError(f"contact.gap ({self.gap.kind}) is a graph only on [{lo_:g}, {hi_:g}], not on the "
+                                 f"contact interval [{a:g}, {b:g}]; narrow the interval or enlarge the arc")
         eps = self.gap_at(np.linspace(a, b, 2001))
         if not np.all(np.isfinite(eps)):
             raise SceneError("the initial gap is not finite on the contact interval")
