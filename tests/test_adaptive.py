@@ -264,6 +264,18 @@ def test_the_first_cycle_is_sized_before_it_is_meshed():
         cvxdual.solve("cylinder-on-block", tol=0.01, max_memory="1MB")
 
 
+def test_the_first_cycle_starts_where_the_scene_meshes():
+    """A hole 2.5 below the face meets level 0's strip (2.5 deep): the run starts at level 1, the size
+    check's probe mesh failing like the mesh itself (the check had let level 0's MeshError out)."""
+    data = builtin_data("block-with-hole")
+    data["bodies"]["bottom"]["holes"][0]["center"] = [0.0, -3.0]
+    scene = load_scene(data)
+    with pytest.raises(cvxdual.MeshError, match="strip"):
+        cvxdual.solve(scene, "type2", 0, stress_space="eq")
+    sol = cvxdual.solve(scene, "type2", tol=0.02)
+    assert sol.adaptive.met and sol.level == 1
+
+
 def test_unmet_tolerance_raises_with_the_best():
     with pytest.raises(ToleranceError, match="max_pieces") as e:
         cvxdual.solve("cylinder-on-block", tol=0.001, max_pieces=2000)

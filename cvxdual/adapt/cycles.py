@@ -45,9 +45,9 @@ def first_cycle(solve, scene, level: int | None, check_level=lambda level: None)
     before it is meshed (:func:`~cvxdual.sizing.check_size`)."""
     levels = [level] if level is not None else list(range(START_LEVELS))
     for lv in levels:
-        check_level(lv)
-        grid = uniform_grid(scene, lv)
         try:
+            check_level(lv)  # its size probe meshes outline bodies: a level they cannot be meshed at fails here
+            grid = uniform_grid(scene, lv)
             return grid, solve(grid)
         except MeshError:
             if lv == levels[-1]:
