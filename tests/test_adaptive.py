@@ -213,10 +213,10 @@ def test_a_run_to_a_tolerance_computes_the_exact_error_once(monkeypatch):
     """The error against the exact field (3-4 s a cycle on rounded-punch-linear at 7000 pieces) is
     computed for the solution returned only, met or not."""
     import cvxdual.eq.run as eq_run
+    from cvxdual.eq.bounds import exact_errors
 
     calls = []
-    monkeypatch.setattr(eq_run, "exact_errors", lambda *a, **k: calls.append(1) or real(*a, **k))
-    real = __import__("cvxdual.eq.bounds", fromlist=["exact_errors"]).exact_errors
+    monkeypatch.setattr(eq_run, "exact_errors", lambda *a, **k: calls.append(1) or exact_errors(*a, **k))
     sol = cvxdual.solve("hertz", tol=0.03)
     assert len(sol.adaptive.cycles) >= 3 and len(calls) == 1 and sol.error is not None
     assert sol.error["combined"] <= sol.bounds["error_bound"]  # the bound dominates the true error
