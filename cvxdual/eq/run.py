@@ -105,9 +105,9 @@ class EquilibriumStresses(StressSpace):
             p.detail = f"{stats.solver}: {stats.status}, iterations {stats.iterations}"
         return Solved(sigma, kin.u if kin.v is None else kin.v, stats, g)
 
-    def recover(self, scene, triangulation, level, system, space, solved, exact_error=True):
+    def recover(self, scene, triangulation, level, system, space, solved):
         return eq_solution(scene, triangulation, level, system, space, solved.stress, solved.column, solved.u,
-                           solved.stats, exact_error)
+                           solved.stats)
 
     def recovered(self, sol) -> str:
         return "exact admissibility, certified bounds" + (", error against the exact field" if sol.error else "")
@@ -161,10 +161,10 @@ def error_summary(e: ExactErrors, bounds: Bounds) -> CertifiedErrors:
                            effectivity=bounds["error_bound"] / e["combined"] if e["combined"] > 0 else None)
 
 
-def eq_solution(scene, triangulation, level, system, space, sigma, g, u,
-                stats: SolverStats, exact_error: bool = True) -> tuple[Solution, float]:
-    """The eq run's :class:`Solution` (timings empty): bounds, residuals and (if ``exact_error``)
-    errors of ``sigma``, ``g`` and ``u``; and the seconds the error against an exact field took."""
+def eq_solution(scene, triangulation, level, system, space, sigma, g, u, stats: SolverStats) -> Solution:
+    """The eq run's :class:`Solution` (timings empty, no error against an exact field: the run adds
+    it, :meth:`~cvxdual.system.stress_space.StressSpace.run`): bounds and residuals of ``sigma``,
+    ``g`` and ``u``."""
     blocks = edge_constraints(space)
     b = certified_bounds(space, sigma, u.reshape(-1, 2) if isinstance(u, np.ndarray) else u, blocks=blocks, g=g)
     v = b["displacement"]
@@ -176,16 +176,11 @@ def eq_solution(scene, triangulation, level, system, space, sigma, g, u,
     res = {"admissibility": max(res.values()), **res,
            "penetration": float(max(0.0, -smin.min(initial=0.0)) / delta)}
     exact, why = exact_reference(scene)
-    error = None
-    t_err = time.perf_counter()
-    if exact is not None and exact_error:
-        error = error_summary(exact_errors(space, sigma, v, exact, g=g), b)
-    t_err = time.perf_counter() - t_err
     energy = max(abs(b["energy_upper"]), abs(b["energy_lower"]), sc.energy * 1e-12)
     contact = edge_contact(system, -contact_tractions(space, sigma, blocks, g), nodal)
     return Solution(scene=scene, triangulation=triangulation, level=int(level), system=system,
                     field=EquilibriumField.of_space(space, sigma, g), displacement=nodal, solver=stats,
                     timings={},
                     objective=-b["energy_lower"], duality_gap=b["gap"] / energy, residuals=res, contact=contact,
-                    exact=exact.data() if exact is not None else None, error=error, bounds=b, space=space,
-                    checks=skipped_error(res, why)), t_err
+                    exact=exact.data() if exact is not None else None, error=None, bounds=b, space=space,
+                    checks=skipped_error(res, why))

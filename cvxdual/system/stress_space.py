@@ -82,8 +82,10 @@ class StressSpace(ABC):
                                 solver_options)
         t3 = time.perf_counter()
         with phase("recover", deadline) as p:
-            sol, t_error = (solved.solution, 0.0) if solved.solution is not None else \
-                self.recover(scene, triangulation, system.mesh.level, system, built, solved, exact_error)
+            sol = solved.solution if solved.solution is not None else \
+                self.recover(scene, triangulation, system.mesh.level, system, built, solved)
+            error, t_error = self._exact_error(sol) if exact_error else (sol.error, 0.0)
+            sol = replace(sol, error=error)
             p.detail = self.recovered(sol)
         t4 = time.perf_counter()
         sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": solved.build_time,
@@ -111,10 +113,8 @@ class StressSpace(ABC):
         """The stresses and the P1 displacement (phases ``solve`` and ``build``)."""
 
     @abstractmethod
-    def recover(self, scene, triangulation: str, level: int, system: System, built,
-                solved: Solved, exact_error: bool = True) -> tuple[Solution, float]:
-        """The solution (timings left empty) and the seconds its error against an exact field took
-        (none unless ``exact_error``)."""
+    def recover(self, scene, triangulation: str, level: int, system: System, built, solved: Solved) -> Solution:
+        """The solution (timings left empty) without its error against an exact field (:meth:`run` adds it)."""
 
     def recovered(self, sol: Solution) -> str:
         """The progress line of the ``recover`` phase."""
@@ -136,14 +136,18 @@ class StressSpace(ABC):
     def with_exact_error(self, sol: Solution) -> Solution:
         """``sol`` (run with ``exact_error`` false) with its error against the scene's exact field, as
         its run would have given it, the time added to its ``error``, ``recover`` and ``total``."""
-        exact, _ = exact_reference(sol.scene)
-        if exact is None or sol.error is not None:
-            return sol
-        t0 = time.perf_counter()
-        error = self.exact_error(sol, exact)
-        dt = time.perf_counter() - t0
+        error, dt = self._exact_error(sol)
         timings = {**sol.timings, **{k: sol.timings[k] + dt for k in ("error", "recover", "total")}}
         return replace(sol, error=error, timings=timings)
+
+    def _exact_error(self, sol: Solution) -> tuple:
+        """``sol``'s error against its scene's exact field (``None`` where none solves it) and its seconds;
+        one it already has is kept (a CVXPY model's own solution)."""
+        exact, _ = exact_reference(sol.scene)
+        if exact is None or sol.error is not None:
+            return sol.error, 0.0
+        t0 = time.perf_counter()
+        return self.exact_error(sol, exact), time.perf_counter() - t0
 
     def certify(self, sol: Solution) -> Solution:
         """``sol`` with certified bounds of its displacement, where the space can give them."""
