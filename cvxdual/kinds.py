@@ -59,3 +59,11 @@ class Stop(StrEnum):
     MEMORY = "memory"
     TIME_LIMIT = "time_limit"
     NO_REFINEMENT = "no_refinement"
+
+
+class Meshed(StrEnum):
+    """How an outline body's part beyond the strip was meshed (:mod:`cvxdual.geometry.outline`): by gmsh,
+    or, in a run to a tolerance, by refining the last cycle's mesh in place."""
+
+    GMSH = "gmsh"
+    IN_PLACE = "in_place"

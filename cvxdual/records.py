@@ -282,8 +282,9 @@ class Cycle(Record):
     """One cycle of a run to a certified tolerance (:mod:`cvxdual.adapt`): its mesh (``pieces``,
     ``triangles``, ``columns``), its certificate (``energy_lower``, ``energy_upper``, ``bound_rel``,
     ``sqrt(2 G)`` relative to the stress's energy norm, ``guaranteed``), the share of ``G`` the
-    marking chose for refinement (``None`` on the last cycle), and seconds: the cycle's own and
-    since the run's start."""
+    marking chose for refinement (``None`` on the last cycle), how each body's part beyond the strip
+    was meshed (``meshed``: ``"gmsh"``, ``"in_place"``, ``None`` for a column body), and seconds: the
+    cycle's own and since the run's start."""
 
     cycle: int
     pieces: int
@@ -294,6 +295,7 @@ class Cycle(Record):
     bound_rel: float
     guaranteed: bool
     marked_share: float | None
+    meshed: tuple
     seconds: float
     elapsed: float
 

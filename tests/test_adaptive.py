@@ -15,9 +15,10 @@ from cvxdual.adapt.marking import dorfler, mark, parse_theta, parse_tolerance
 from cvxdual.adapt.outline_view import outline_body, outline_scene
 from cvxdual.cli import main
 from cvxdual.errors import CvxdualError, SceneError, ToleranceError
-from cvxdual.geometry.grid import BALANCE, Grid
+from cvxdual.geometry.grid import BALANCE, Grid, InPlace
 from cvxdual.geometry.outline.cuts import find_cuts
 from cvxdual.geometry.triangulation import discretize, uniform_grid
+from cvxdual.kinds import Meshed
 from cvxdual.pipeline import as_scene, build_system, space_of
 from cvxdual.reference.exact import exact_reference
 from cvxdual.scene.scene import BoundaryPart, Traction
@@ -73,20 +74,25 @@ def test_uniform_grid_is_the_level():
     assert np.array_equal(m1.points, m2.points) and np.array_equal(m1.triangles(), m2.triangles())
 
 
-def _refined_grids(scene, n, seed=0):
-    """``n`` grids, each from the last by random column marks and spots (a reproducible stand-in for marking)."""
+def _refined_grids(scene, n, seed=0, tri="type2"):
+    """``n`` grids, each from the last by random column marks and spots, and every other one by
+    refining the last mesh in place too (random triangles and pieces beyond free arcs halved), as a
+    run alternates: a reproducible stand-in for marking."""
     rng = np.random.default_rng(seed)
     grid = uniform_grid(scene, 0)
     out = []
     for _ in range(n):
         cols = rng.random(len(grid.columns) - 1) < 0.3
         spots = []
-        m, _, _ = discretize(scene, "type2", grid)
+        m, _, _ = discretize(scene, tri, grid)
         for bm in m.bodies:
             pts = bm.points()[len(bm.columns) * 2:]  # gmsh's nodes beyond the strip
             pick = pts[rng.choice(len(pts), size=min(3, len(pts)), replace=False)]
             spots.append(np.concatenate([pick, np.full((len(pick), 1), 0.3)], 1))
-        grid = grid.refined(scene, cols, tuple(spots))
+        again = None if grid.in_place is not None else InPlace(
+            m.bodies, tuple(rng.random(len(bm.rest.triangles)) < 0.2 for bm in m.bodies),
+            tuple(rng.random(len(bm.rest.virtual_weight)) < 0.5 for bm in m.bodies), grid.spots)
+        grid = grid.refined(scene, cols, tuple(spots), again)
         out.append(grid)
     return out
 
@@ -95,10 +101,12 @@ def _refined_grids(scene, n, seed=0):
                                        ("rounded-punch", "type2")])
 def test_refined_meshes_keep_the_structure(name, tri):
     scene = outline_scene(as_scene(name))
-    for grid in _refined_grids(scene, 3):
+    for i, grid in enumerate(_refined_grids(scene, 3, tri=tri)):
         w = np.diff(grid.columns)
         assert np.all(w[1:] <= BALANCE * w[:-1] * (1 + 1e-12)) and np.all(w[:-1] <= BALANCE * w[1:] * (1 + 1e-12))
         mesh, pieces, _ = discretize(scene, tri, grid)  # every check of a uniform mesh runs here
+        # the first and third refined in place (a body by gmsh where its columns split twice), the second by gmsh
+        assert (Meshed.IN_PLACE in [bm.meshed for bm in mesh.bodies]) == (i != 1)
         up, lo = mesh.pairs.T
         assert np.array_equal(mesh.points[up, 0], mesh.points[lo, 0])  # pairs on common vertical lines
         assert np.all(pieces.area > 0)
@@ -167,8 +175,9 @@ def test_patch_test_exact_on_refined_meshes():
     """The exact stress is constant: reproduced on locally refined meshes, and G vanishes."""
     scene = outline_scene(as_scene("patch"))
     eq = space_of("eq")
-    for grid in _refined_grids(scene, 2, seed=3):
+    for i, grid in enumerate(_refined_grids(scene, 2, seed=3)):
         sol = eq.run(scene, "type2", grid, "FAST")
+        assert all(bm.meshed is (Meshed.GMSH if i else Meshed.IN_PLACE) for bm in sol.mesh.bodies)
         # the stresses are exact to the solver's rounding (1e-9 of the load, as on uniform meshes)
         assert sol.error["l2_rel"] < 1e-9
         assert sol.bounds["error_bound_rel"] < 1e-6  # sqrt of a rounding-level G

@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, replace
 
 from ..errors import CvxdualError, MeshError, TimeLimitError, ToleranceError, TooLargeError
-from ..geometry.grid import Grid
+from ..geometry.grid import Grid, InPlace
 from ..geometry.triangulation import uniform_grid
 from ..kinds import Stop
 from ..progress import Deadline, log, phase
@@ -83,8 +83,12 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
                 if not met:
                     with phase("refine", deadline) as p:  # a time-out here, too, keeps the best cycle
                         marks = mark(grid, sol.space, b["contributions"], plan.theta)
-                        nxt = grid.refined(scene, marks.columns, marks.spots).with_start(sol.mesh.pair_x,
-                                                                                         sol.contact["active"])
+                        # a mesh gmsh made is refined in place; the next cycle's is meshed again (gmsh's quality
+                        # back: a closure's cuts are not cut again)
+                        again = (None if grid.in_place is not None
+                                 else InPlace(sol.mesh.bodies, marks.rest, marks.arcs, grid.spots))
+                        nxt = grid.refined(scene, marks.columns, marks.spots, again).with_start(
+                            sol.mesh.pair_x, sol.contact["active"])
                         cols, spots = len(nxt.columns) - len(grid.columns), sum(map(len, nxt.spots))
                         p.detail = f"Dorfler: {marks.share:.0%} of G marked; {cols} columns more, {spots} spots"
         except TimeLimitError:
@@ -96,7 +100,8 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
         cycles.append(Cycle(cycle=len(cycles), pieces=int(sol.field.n_pieces), triangles=len(sol.mesh.triangles()),
                             columns=len(grid.columns), energy_lower=float(b["energy_lower"]),
                             energy_upper=float(b["energy_upper"]), bound_rel=rel, guaranteed=bool(b["guaranteed"]),
-                            marked_share=None if marks is None else marks.share, seconds=now - t, elapsed=now - t0))
+                            marked_share=None if marks is None else marks.share,
+                            meshed=tuple(bm.meshed for bm in sol.mesh.bodies), seconds=now - t, elapsed=now - t0))
         log.info("cycle %d: %d pieces, certified error %.3g %%%s, %.2f s", len(cycles) - 1, cycles[-1].pieces,
                  100 * rel, "" if b["guaranteed"] else " (not guaranteed)", now - t)
         if best is None or rel <= best[1]:

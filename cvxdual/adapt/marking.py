@@ -24,11 +24,15 @@ THETA = 0.5  # Dorfler's fraction: 0.3-0.6 is the usual range; 0.5 halved G's cy
 @dataclass(frozen=True, eq=False)
 class Marks:
     """What to refine: column intervals to halve ``columns`` (bool), per body the ``spots`` ``(m, 3)``
-    (``x, y, size`` asked beyond the strip), and the ``share`` of ``G`` the marked contributions hold."""
+    (``x, y, size`` asked beyond the strip), the marked triangles of its gmsh part (``rest``, bool;
+    empty for a body without one) and pieces beyond its free arcs (``arcs``, bool), and the ``share``
+    of ``G`` the marked contributions hold."""
 
     columns: np.ndarray
     spots: tuple
     share: float
+    rest: tuple = ()
+    arcs: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,4 +137,29 @@ def mark(grid: Grid, space, contributions, theta: float = THETA) -> Marks:
         beyond = (height > 1.5 * depth) & (size > 0)  # a spot of size 0 would ask gmsh for no mesh
         spots.append(np.stack([x[beyond], y[beyond], 0.5 * size[beyond]], 1))
     share = float(loc.weight[chosen].sum() / loc.weight.sum()) if loc.weight.sum() > 0 else 0.0
-    return Marks(cols, tuple(spots), share)
+    n_arcs = sum(len(bm.rest.virtual_weight) for bm in space.mesh.bodies if bm.rest is not None)
+    arcs, at = [], len(chosen) - n_arcs  # the pieces beyond free arcs come last, body by body
+    for bm in space.mesh.bodies:
+        m = 0 if bm.rest is None else len(bm.rest.virtual_weight)
+        arcs.append(chosen[at:at + m])
+        at += m
+    return Marks(cols, tuple(spots), share, _rest_marks(space, chosen[:len(space.tri)]), tuple(arcs))
+
+
+def _rest_marks(space, chosen: np.ndarray) -> tuple:
+    """Per body, which triangles of its gmsh part the ``chosen`` triangles of ``space`` are (bool)."""
+    bodies = space.mesh.bodies
+    rests = [np.sort(bm.offset + bm.rest.triangles, axis=1) for bm in bodies if bm.rest is not None]
+    picked = np.sort(space.tri[chosen], axis=1)
+    # one id per node triple, whatever its corners' order
+    _, ids = np.unique(np.concatenate([picked, *rests]).astype(np.int64), axis=0, return_inverse=True)
+    ids = ids.ravel()
+    hit, at, out = ids[:len(picked)], len(picked), []
+    for bm in bodies:
+        if bm.rest is None:
+            out.append(np.zeros(0, bool))
+            continue
+        m = len(bm.rest.triangles)
+        out.append(np.isin(ids[at:at + m], hit))
+        at += m
+    return tuple(out)

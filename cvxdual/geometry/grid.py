@@ -31,6 +31,19 @@ CLOSURE_PASSES = 64  # each pass only splits; a marking closes in a few (the gra
 MIN_WIDTH = 1e-7  # relative to the scene's width: narrower intervals are not split (rounding would pair them)
 
 
+@dataclass(frozen=True, eq=False)
+class InPlace:
+    """The last cycle's body meshes (:class:`~cvxdual.geometry.mesh.BodyMesh`), per body the
+    triangles of its gmsh part and the pieces beyond its free arcs to halve (bool) and the spots it
+    was meshed for: the next mesh refines them in place instead of meshing the body with gmsh again
+    (:func:`~cvxdual.geometry.outline.in_place.refine_in_place`)."""
+
+    bodies: tuple
+    marked: tuple
+    arcs: tuple
+    spots: tuple
+
+
 @dataclass(frozen=True, eq=False)  # arrays: identity, not elementwise ==
 class Grid:
     """An adaptive mesh plan: ``level`` (the uniform level it started from: the arcs' polygons and
@@ -39,13 +52,15 @@ class Grid:
     size``), ``base``: the columns of that level, where gmsh's surfaces are cut as on its mesh
     (refinement crowds the columns where ``G`` lives; cuts crowded there leave slivers between
     them far from the face), and ``start``: the contact set ``(pair_x, active)`` of the last
-    cycle, the fast paths' warm start."""
+    cycle, the fast paths' warm start. ``in_place``: the last mesh to refine in place where it can
+    be (the spots are kept all the same: the next gmsh mesh asks for them)."""
 
     level: int
     columns: np.ndarray
     spots: tuple
     base: np.ndarray
     start: tuple | None = None
+    in_place: InPlace | None = None
 
     @classmethod
     def uniform(cls, scene: Scene, level: int, columns: np.ndarray) -> Grid:
@@ -64,15 +79,17 @@ class Grid:
         return replace(self, start=(np.asarray(pair_x, float), np.asarray(active)))
 
     def same_mesh(self, other: Grid) -> bool:
-        """Whether ``other`` asks for the same mesh (the same columns and spots)."""
-        return np.array_equal(self.columns, other.columns) and all(
+        """Whether this grid asks for the mesh of ``other`` (the same columns and spots, nothing to halve in place)."""
+        halves = self.in_place is not None and any(m.any() for m in (*self.in_place.marked, *self.in_place.arcs))
+        return not halves and np.array_equal(self.columns, other.columns) and all(
             np.array_equal(a, b) for a, b in zip(self.spots, other.spots, strict=True))
 
-    def refined(self, scene: Scene, columns: np.ndarray, spots: tuple) -> Grid:
+    def refined(self, scene: Scene, columns: np.ndarray, spots: tuple, in_place: InPlace | None = None) -> Grid:
         """The grid with the column intervals ``columns`` (bool, one per interval of
         :attr:`columns`) halved, closed by :data:`BALANCE`, and the ``spots[k]`` ``(m, 3)`` added to
         body ``k``'s, each at most half the size the old spots ask there (gmsh may have made
-        triangles larger than asked), keeping the spots no smaller spot's field already covers."""
+        triangles larger than asked), keeping the spots no smaller spot's field already covers;
+        ``in_place`` as in :class:`Grid`."""
         x0, x1 = scene.x_extent
         floor = MIN_WIDTH * (x1 - x0)
         cols = _split(self.columns, np.asarray(columns, bool), floor)
@@ -86,7 +103,7 @@ class Grid:
         new = tuple(s if not len(n) else _covered(np.concatenate([s, _halved(s, np.asarray(n, float), self.growth)]),
                                                   self.growth)
                     for s, n in zip(self.spots, spots, strict=True))
-        return replace(self, columns=cols, spots=new)
+        return replace(self, columns=cols, spots=new, in_place=in_place)
 
 
 def _halved(spots: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:

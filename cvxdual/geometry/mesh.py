@@ -24,11 +24,14 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import MeshError
+from ..kinds import Meshed
+from ..progress import log
 from ..records import MeshSize
 from ..scene.scene import Body, Scene
 from ..validate import short
 from .mesh_check import check_body_mesh
 from .outline import ContinuationRule, RestMesh, continuation_rule, held_parts, mesh_rest, strip_depth
+from .outline.in_place import refine_in_place
 from .triangles import edge_lengths
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)
@@ -167,6 +170,7 @@ class BodyMesh:
     face_y: np.ndarray
     inner_y: np.ndarray | None = None
     rest: RestMesh | None = None
+    meshed: Meshed | None = None  # how ``rest`` was made
 
     @property
     def inner(self) -> np.ndarray:
@@ -350,14 +354,16 @@ def side_breaks(body: Body, f0: float, f1: float) -> list[float]:
 
 
 def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | None = None,
-               face_y=(None, None), spots=(None, None), cut_columns=None) -> Mesh:
+               face_y=(None, None), spots=(None, None), cut_columns=None, in_place=None) -> Mesh:
     """Build the column mesh of ``scene`` at ``level`` (default: the scene's default level).
 
     ``columns`` replaces the graded global columns; ``face_y[k]`` (a function of the column
     abscissae) replaces the face heights of body ``k``'s face nodes. An adaptive grid
     (:class:`~cvxdual.geometry.grid.Grid`) gives ``spots[k]`` ``(m, 3)``, sizes ``(x, y, size)``
     asked of outline body ``k``'s part beyond the strip, and ``cut_columns``, the global columns
-    of the level it started from, where gmsh's surfaces are cut as on that level's mesh.
+    of the level it started from, where gmsh's surfaces are cut as on that level's mesh, and may give
+    ``in_place`` (:class:`~cvxdual.geometry.grid.InPlace`): the last mesh's bodies, refined in place
+    where that can be done (:func:`~cvxdual.geometry.outline.in_place.refine_in_place`), else meshed.
     """
     level = check_level(scene.mesh.default_level if level is None else level)
     cols = column_abscissae(scene, level) if columns is None else np.asarray(columns, float)
@@ -379,11 +385,13 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
             bm = BodyMesh(body, offset, c, eta, fy)
         else:
             inner = body.face.value(c) + body.sign * strip_depth(c)
-            cuts = None if cut_columns is None else cut_columns[(cut_columns >= x0) & (cut_columns <= x1)]
-            rest = mesh_rest(body, c, inner, level, spots[k], cuts)
-            bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest)
-            # a wrong loop handed to gmsh meshes the wrong region without an error: check it against the outline
-            check_body_mesh(body, bm.points(), bm.triangles() - offset, bm.side_nodes("face") - offset, rest.parts)
+            bm = _in_place(body, offset, c, fy, inner, level, spots[k], in_place, k)
+            if bm is None:
+                cuts = None if cut_columns is None else cut_columns[(cut_columns >= x0) & (cut_columns <= x1)]
+                rest = mesh_rest(body, c, inner, level, spots[k], cuts)
+                bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest, Meshed.GMSH)
+                # a wrong loop handed to gmsh meshes the wrong region without an error: check it against the outline
+                check_body_mesh(body, bm.points(), bm.triangles() - offset, bm.side_nodes("face") - offset, rest.parts)
         bms.append(bm)
         pts.append(bm.points())
         offset += bm.n_nodes
@@ -392,6 +400,22 @@ def build_mesh(scene: Scene, level: int | None = None, columns: np.ndarray | Non
     mesh = Mesh(scene, int(level), tuple(bms), points, pairs, pair_x)
     check_triangles(points, mesh.triangles())
     return mesh
+
+
+def _in_place(body, offset: int, c, fy, inner, level: int, spots, in_place, k: int) -> BodyMesh | None:
+    """Body ``k``'s mesh refined in place from ``in_place`` and checked, or None: gmsh meshes it."""
+    prior = None if in_place is None else in_place.bodies[k]
+    if prior is None or prior.rest is None:
+        return None
+    try:
+        rest = refine_in_place(body, prior, c, fy, inner, level, (in_place.spots[k], spots), in_place.marked[k],
+                               in_place.arcs[k])
+        bm = BodyMesh(body, offset, c, np.array([0.0, 1.0]), fy, inner, rest, Meshed.IN_PLACE)
+        check_body_mesh(body, bm.points(), bm.triangles() - offset, bm.side_nodes("face") - offset, rest.parts)
+    except MeshError as e:  # a fold, or columns that moved: gmsh meshes it, as any cycle's
+        log.info("body %r meshed by gmsh: %s", body.name, e)
+        return None
+    return bm
 
 
 def _pairs(scene: Scene, bms, points) -> tuple[np.ndarray, np.ndarray]:

@@ -7,6 +7,10 @@ refined once (:mod:`~cvxdual.geometry.outline`): the size field halves everywher
 gmsh makes a quarter of the triangles. A triangle with one edge left whole (the strip's sides,
 which the strip's own mesh does not split) is cut into three instead: the corner between the
 halved edges, and the rest along the shorter diagonal.
+
+:func:`refine_edges` halves chosen edges only: local refinement, red-green (a triangle with one
+halved edge is cut in two from its new node to the opposite corner), for a run to a tolerance's
+cycles that refine the last mesh in place (:mod:`~cvxdual.geometry.outline.in_place`).
 """
 
 from __future__ import annotations
@@ -64,16 +68,43 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     ``(w, 2)``; the new node of edge ``moved[i]`` ``(q, 2)`` lies at ``to[i]`` instead of the
     edge's midpoint. Triangles with every edge halved give four, with one edge whole three; a
     triangle with two or three whole edges is refused (no outline mesh has one)."""
-    points = np.asarray(points, float)
     tri = np.asarray(triangles, np.int64)
-    n = len(points)
-    e = np.stack([tri, np.roll(tri, -1, axis=1)], -1)  # (m, 3, 2): edge j runs from corner j to j + 1
-    keys, inv = np.unique(edge_keys(e[..., 0], e[..., 1], n), return_inverse=True)
-    inv = inv.reshape(tri.shape)
+    keys, inv = _edges(tri, len(points))
     split = np.ones(len(keys), bool)
     if whole is not None and len(whole):
         w = np.asarray(whole, np.int64).reshape(-1, 2)
-        split[np.searchsorted(keys, edge_keys(w[:, 0], w[:, 1], n))] = False
+        split[np.searchsorted(keys, edge_keys(w[:, 0], w[:, 1], len(points)))] = False
+    if np.any(np.sum(~split[inv], axis=1) > 1):
+        raise MeshError("internal: a triangle to refine has two edges that must stay whole")
+    return _cut(np.asarray(points, float), tri, keys, inv, split, moved, to)
+
+
+def refine_edges(points: np.ndarray, triangles: np.ndarray, edges, moved=None, to=None) -> Refined:
+    """Halve the edges ``edges`` ``(s, 2)`` of ``triangles`` only (local refinement; ``moved``,
+    ``to`` as in :func:`refine`): a triangle with three halved edges gives four, with two three,
+    with one two (cut from the halved edge's new node to the opposite corner), with none itself.
+    The caller closes the marking (a triangle with two halved edges had better have three)."""
+    tri = np.asarray(triangles, np.int64)
+    keys, inv = _edges(tri, len(points))
+    split = np.zeros(len(keys), bool)
+    s = np.asarray(edges, np.int64).reshape(-1, 2)
+    k = edge_keys(s[:, 0], s[:, 1], len(points))
+    pos = np.clip(np.searchsorted(keys, k), 0, max(len(keys) - 1, 0))
+    if len(k) and not np.array_equal(keys[pos], k):
+        raise MeshError("internal: an edge to halve is not an edge of the mesh")
+    split[pos] = True
+    return _cut(np.asarray(points, float), tri, keys, inv, split, moved, to)
+
+
+def _edges(tri: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sorted keys of the mesh's edges and each triangle's edge ``j`` (corner ``j`` to ``j + 1``) among them."""
+    keys, inv = np.unique(edge_keys(tri, np.roll(tri, -1, axis=1), n), return_inverse=True)
+    return keys, inv.reshape(tri.shape)
+
+
+def _cut(points, tri, keys, inv, split, moved, to) -> Refined:
+    """Each triangle cut by the new nodes on its ``split`` edges (4, 3, 2 or 1 children)."""
+    n = len(points)
     a, b = keys // n, keys % n
     xy = 0.5 * (points[a] + points[b])
     if moved is not None and len(moved):
@@ -83,8 +114,6 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     mid[split] = n + np.arange(int(split.sum()))
     m = mid[inv]  # (m, 3): the new node on edge j of each triangle
     n_whole = np.sum(m < 0, axis=1)
-    if np.any(n_whole > 1):
-        raise MeshError("internal: a triangle to refine has two edges that must stay whole")
     v0, v1, v2 = tri.T
     m0, m1, m2 = m.T
     four = n_whole == 0
@@ -101,11 +130,18 @@ def refine(points: np.ndarray, triangles: np.ndarray, whole=None, moved=None, to
     short = (np.linalg.norm(new[a0] - new[b1], axis=1) <= np.linalg.norm(new[b0] - new[a2], axis=1))[:, None]
     out += [np.stack([b0, a1, b1], 1), np.where(short, np.stack([a0, b0, b1], 1), np.stack([a0, b0, a2], 1)),
             np.where(short, np.stack([a0, b1, a2], 1), np.stack([b0, b1, a2], 1))]
+    # one edge halved: turn it to edge 0 (v0 -> v1), then cut from its node to corner 2
+    two = np.flatnonzero(n_whole == 2)
+    r = np.argmax(m[two] >= 0, axis=1)
+    turn = (np.arange(3)[None, :] + r[:, None]) % 3
+    t2, c0 = np.take_along_axis(tri[two], turn, 1), np.take_along_axis(m[two], turn, 1)[:, 0]
+    out += [np.stack([t2[:, 0], c0, t2[:, 2]], 1), np.stack([c0, t2[:, 1], t2[:, 2]], 1)]
+    one = np.flatnonzero(n_whole == 3)
+    out.append(tri[one])
     children = np.concatenate(out)
     # a moved node must not fold a triangle over: every child keeps its parent's orientation
-    parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3)
+    parent = np.concatenate([np.flatnonzero(four)] * 4 + [three] * 3 + [two] * 2 + [one])
     if np.any(np.sign(doubled_areas(new, children)) != np.sign(doubled_areas(points, tri[parent]))):
         raise FoldError("refining the mesh folds a triangle over (a node placed on a curved part or on the strip "
                         "crosses it); raise the level, or move the part away from the others")
     return Refined(points=new, triangles=children, n_old=n, edge_keys=keys, edge_mid=mid)
-

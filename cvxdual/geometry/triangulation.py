@@ -117,7 +117,7 @@ def discretize(scene: Scene, triangulation: str = "type1", level: int | Grid | N
             if polygons[k]:
                 face_y[k] = _polygon_heights(body, polygons[k])
     mesh = build_mesh(scene, level, columns=cols, face_y=face_y, spots=(None, None) if grid is None else grid.spots,
-                      cut_columns=base)
+                      cut_columns=base, in_place=None if grid is None else grid.in_place)
     return (mesh, *_pieces(mesh, tri, polygons))
 
 

@@ -3,7 +3,8 @@ gmsh in a process of its own. :func:`mesh_rest` is the entry (kept meshes, timed
 :mod:`~cvxdual.geometry.outline.mesher` runs the steps on one
 :class:`~cvxdual.geometry.outline.build.OutlineBuild`: the loops (``loops``), the cuts into
 surfaces (``cuts``, ``regions``), the sizes (``sizes``), gmsh's mesh, and reading it back, refined
-and renumbered (``readback``); ``arcs`` holds the curved parts' polygons, ``fence`` and
+and renumbered (``readback``); ``in_place`` refines a mesh made so without gmsh (a run to a
+tolerance's every other cycle); ``arcs`` holds the curved parts' polygons, ``fence`` and
 ``worker`` the gmsh process, ``quadrature`` a rule on the exact pieces beyond the free arcs."""
 
 from .build import SPLINE_SAMPLES, held_parts
