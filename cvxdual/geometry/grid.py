@@ -3,9 +3,10 @@
 A :class:`Grid` is what a level is for a uniform run, made local, for scenes whose bodies are
 outline bodies (a run to a tolerance gives a column body as its outline body,
 :mod:`cvxdual.adapt.outline_view`): the global columns, on which both bodies' strips stand, and
-per body the *spots*, sizes asked at points beyond the strip, which gmsh meshes every cycle with
-the spots among the sources of its size field (:class:`~cvxdual.geometry.outline.sizes.SizeField`;
-a free arc's polygon gets edges no longer than the sizes asked on it). Halving a column interval
+per body the *spots*, sizes asked at points beyond the strip, which gmsh meshes with the spots
+among the sources of its size field (:class:`~cvxdual.geometry.outline.sizes.SizeField`; a free
+arc's polygon gets edges no longer than the sizes asked on it), and every other cycle the last mesh
+to refine in place instead (:class:`InPlace`). Halving a column interval
 splits the face in *both* bodies at the same ``x``, so contact pairs stay on common vertical lines
 and the curved pieces follow their chords by the type 1 / type 2 rules, exactly as on a uniform
 level: :func:`~cvxdual.geometry.triangulation.discretize` builds a grid's mesh with the same code
