@@ -14,7 +14,7 @@ import cvxdual
 from cvxdual.adapt.outline_view import outline_scene
 from cvxdual.geometry.grid import InPlace
 from cvxdual.geometry.refine import refine_edges
-from cvxdual.geometry.triangles import doubled_areas, edge_keys
+from cvxdual.geometry.triangles import doubled_areas, edge_keys, least_angles
 from cvxdual.geometry.triangulation import discretize, uniform_grid
 from cvxdual.kinds import Meshed
 from cvxdual.pipeline import as_scene
@@ -58,19 +58,22 @@ def _covered(mesh, pieces, k):
     return float(pieces.area[pieces.body == k].sum()), float(mesh.continuation_rule().weights[body == k].sum())
 
 
-@pytest.mark.parametrize("name", ["block-with-hole", "rounded-punch"])  # a hole's corners; a fillet's segments
-def test_a_body_refined_in_place_is_the_same_body(name):
+# a hole's corners (block-with-hole's thin upper body is meshed by gmsh: test_a_body_that_would_thin_is_meshed_by_gmsh);
+# a fillet's segments and the strip's chain following new columns
+@pytest.mark.parametrize("name, split, how", [("block-with-hole", 0.0, (Meshed.GMSH, Meshed.IN_PLACE)),
+                                              ("rounded-punch", 0.3, (Meshed.IN_PLACE, Meshed.IN_PLACE))])
+def test_a_body_refined_in_place_is_the_same_body(name, split, how):
     scene = outline_scene(as_scene(name))
     grid = uniform_grid(scene, 0)
     mesh, old, _ = discretize(scene, "type2", grid)
     rng = np.random.default_rng(1)
     tris = tuple(rng.random(len(bm.rest.triangles)) < 0.3 for bm in mesh.bodies)
     arcs = tuple(np.ones(len(bm.rest.virtual_weight), bool) for bm in mesh.bodies)
-    cols = rng.random(len(grid.columns) - 1) < 0.3
+    cols = rng.random(len(grid.columns) - 1) < split
     fine = grid.refined(scene, cols, tuple(np.zeros((0, 3)) for _ in mesh.bodies),
                         InPlace(mesh.bodies, tris, arcs, grid.spots))
     new, pieces, _ = discretize(scene, "type2", fine)  # every check of a mesh runs here (strip, pairs, region)
-    assert all(bm.meshed is Meshed.IN_PLACE for bm in new.bodies)
+    assert tuple(bm.meshed for bm in new.bodies) == how
     up, lo = new.pairs.T
     assert np.array_equal(new.points[up, 0], new.points[lo, 0])
     for k, bm in enumerate(mesh.bodies):
@@ -81,8 +84,33 @@ def test_a_body_refined_in_place_is_the_same_body(name):
         assert len(new.bodies[k].rest.virtual_weight) == 2 * n  # every piece halved
         if n:
             assert after[1] < 0.5 * before[1]  # a piece halved keeps about a quarter of its area (a fillet: an eighth)
-        assert len(new.bodies[k].rest.triangles) >= len(bm.rest.triangles) + 3 * int(tris[k].sum())
+        if how[k] is Meshed.IN_PLACE:  # a marked triangle gives at least four
+            assert len(new.bodies[k].rest.triangles) >= len(bm.rest.triangles) + 3 * int(tris[k].sum())
+        # shape kept: bisection by longest edges keeps at least half the smallest angle (Rosenberg and Stenger);
+        # a closure that cut the edge facing a small angle halved it again every cycle (11 degrees, seen)
+        least = [
+            least_angles(m.points[b.offset + b.rest.triangles]).min()
+            for m, b in ((mesh, bm), (new, new.bodies[k]))]
+        assert least[1] >= 0.5 * least[0]
     assert np.all(pieces.area > 0)
+
+
+def test_a_body_that_would_thin_is_meshed_by_gmsh():
+    """block-with-hole's upper body beyond its strip is one row of triangles whose longest edges lie on
+    the strip's chain, which only a column's split halves: a closure would halve their smaller angles."""
+    scene = outline_scene(as_scene("block-with-hole"))
+    grid = uniform_grid(scene, 0)
+    mesh, _, _ = discretize(scene, "type2", grid)
+    rng = np.random.default_rng(1)
+    tris = tuple(rng.random(len(bm.rest.triangles)) < 0.3 for bm in mesh.bodies)
+    arcs = tuple(np.zeros(len(bm.rest.virtual_weight), bool) for bm in mesh.bodies)
+    new, _, _ = discretize(scene, "type2", grid.refined(scene, np.zeros(len(grid.columns) - 1, bool),
+                                                         (np.zeros((0, 3)),) * 2,
+                                                         InPlace(mesh.bodies, tris, arcs, grid.spots)))
+    assert [bm.meshed for bm in new.bodies] == [Meshed.GMSH, Meshed.IN_PLACE]
+    for old, bm in zip(mesh.bodies, new.bodies, strict=True):
+        assert least_angles(new.points[bm.offset + bm.rest.triangles]).min() >= 0.5 * least_angles(
+            mesh.points[old.offset + old.rest.triangles]).min()
 
 
 def test_columns_halved_twice_are_meshed_by_gmsh():

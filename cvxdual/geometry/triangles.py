@@ -1,6 +1,6 @@
 """Helpers on arrays of triangles ``(m, 3)`` (node indices) shared by the meshes, their
 refinement and the equilibrium space's edges: one integer key per undirected edge, signed
-areas and edge lengths; and on arrays of corners ``(m, 3, 2)``: the barycentric (Alfeld) split the
+areas, edge lengths and least angles; and on arrays of corners ``(m, 3, 2)``: the barycentric (Alfeld) split the
 Johnson-Mercier element and the P2 displacement share, barycentric gradients."""
 
 from __future__ import annotations
@@ -26,6 +26,13 @@ def edge_lengths(X: np.ndarray) -> np.ndarray:
     """The lengths of the edges of triangles with corners ``X`` ``(m, 3, 2)``: ``(m, 3)``, edge ``j``
     from corner ``j - 1`` to ``j`` (the longest is the triangle's diameter)."""
     return np.linalg.norm(X - np.roll(X, 1, axis=1), axis=2)
+
+
+def least_angles(X: np.ndarray) -> np.ndarray:
+    """The smallest angle (radians) of each triangle with corners ``X`` ``(m, 3, 2)``."""
+    u, v = np.roll(X, -1, axis=1) - X, np.roll(X, 1, axis=1) - X  # the two edges at each corner
+    cos = np.sum(u * v, axis=2) / (np.linalg.norm(u, axis=2) * np.linalg.norm(v, axis=2))
+    return np.arccos(np.clip(cos, -1.0, 1.0)).min(axis=1)
 
 
 def sub_vertices(X: np.ndarray) -> np.ndarray:

@@ -2,17 +2,19 @@
 that follows a gmsh cycle (:mod:`cvxdual.adapt.cycles`, docs/adaptive.md).
 
 The last cycle's :class:`~cvxdual.geometry.outline.readback.RestMesh` is refined locally
-(:func:`~cvxdual.geometry.refine.refine_edges`): every edge of a marked triangle is halved,
-closed red-green (a triangle with two halved edges gets its third halved, one with one is cut in
-two), and the strip's inner chain follows the new columns: its edge over a halved column interval
+(:func:`~cvxdual.geometry.refine.refine_edges`): every edge of a marked triangle is halved, and
+closed by longest edges (a triangle with a halved edge has its longest halved too, so a cut never
+halves a small angle: at least half the least angle is kept, as bisection by longest edges keeps),
+and the strip's inner chain follows the new columns: its edge over a halved column interval
 gets the new column's inner node, and its old nodes move to the new strip depth
 (:func:`~cvxdual.geometry.outline.sizes.strip_depth`, the mean of the adjacent spacings). Edges
-on a straight outline part are halved at their midpoints; every other boundary edge stays whole (a
-free arc's polygon and the pieces beyond it, a held arc's and a spline's polygons: only gmsh
-remakes those), as do chain edges over intervals not halved. What cannot be done this way raises
+on a straight outline part are halved at their midpoints; a free arc's polygon is refined where
+the pieces beyond it are halved (:class:`_Pieces`); a held arc's and a spline's polygons stay whole
+(gmsh remakes those), as do chain edges over intervals not halved. What cannot be done this way raises
 :class:`~cvxdual.geometry.refine.FoldError` and the caller meshes with gmsh instead: columns
 halved twice in one interval (the strip's closure), the columns not nested (type 2's tangent
-polygons moved), or a node that folds a triangle over.
+polygons moved), a node that folds a triangle over, or an angle below half the last mesh's least
+(a longest edge on the chain or a curve, which stays whole, or a chain moved far).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import numpy as np
 
 from ...scene.planar import point_segment_distance
 from ..refine import FoldError, refine_edges
-from ..triangles import doubled_areas, edge_keys, edge_lengths
+from ..triangles import doubled_areas, edge_keys, edge_lengths, least_angles
 from .readback import RestMesh
 from .sizes import SizeField
 
@@ -31,6 +33,8 @@ ROUND = 1e-9  # relative to the body's size: a node this close to a straight par
 # seven scenes took the fewest pieces in all at 1.2 (at 0.8 and 1.0: within 3 % each, punch-on-block 12-18 % more)
 SIZE_SLACK = 1.2
 SHRINK = 0.75  # ... and the size asked there is below this times what it was
+KEEP_ANGLE = 0.5  # no angle below half the last mesh's least: what bisection by longest edges keeps
+CLOSURE_PASSES = 256  # each pass halves the longest edge of the triangles a halved edge reached: a few dozen do
 
 
 def refine_in_place(body, prior, columns, face_y, inner, level: int, spots: tuple, marked, arcs) -> RestMesh:
@@ -41,8 +45,9 @@ def refine_in_place(body, prior, columns, face_y, inner, level: int, spots: tupl
     halved, and those the size field of ``level`` asks markedly less of (:func:`asks_less`; ``spots``:
     the old spots and the new, :class:`~cvxdual.geometry.outline.sizes.SizeField`)."""
     tri, arc = asks_less(prior, columns, inner, level, *spots)
+    least = float(least_angles(prior.points()[prior.rest.triangles]).min()) if len(prior.rest.triangles) else 0.0
     return _refined(body, prior.rest, prior.columns, columns, face_y, inner, np.asarray(marked, bool) | tri,
-                    np.asarray(arcs, bool) | arc)
+                    np.asarray(arcs, bool) | arc, KEEP_ANGLE * least)
 
 
 def asks_less(prior, columns, inner, level: int, old_spots, spots) -> tuple[np.ndarray, np.ndarray]:
@@ -60,9 +65,9 @@ def asks_less(prior, columns, inner, level: int, old_spots, spots) -> tuple[np.n
     return shrink[:len(X)], shrink[len(X):]
 
 
-def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, arcs) -> RestMesh:
+def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, arcs, least: float) -> RestMesh:
     """``rest`` (meshed beyond the strip on ``old_columns``) refined for the strip on ``columns``,
-    ``marked`` triangles and ``arcs`` pieces halved (:func:`refine_in_place`)."""
+    ``marked`` triangles and ``arcs`` pieces halved (:func:`refine_in_place`), no angle below ``least``."""
     old_columns, columns = np.asarray(old_columns, float), np.asarray(columns, float)
     nc0, nc, nr = len(old_columns), len(columns), len(rest.points)
     pos = np.searchsorted(columns, old_columns)
@@ -79,11 +84,11 @@ def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, 
     chain = np.stack([2 * pos[halved] + 1, 2 * pos[halved + 1] + 1], 1)
     chain_new = 2 * (pos[halved] + 1) + 1
     pieces = _Pieces.of(rest, remap, P, np.asarray(arcs, bool), 2 * nc0 + nr)
+    P[pieces.corner] = pieces.tip  # a halved corner's node moves onto the arc, between the cuts
     moved = np.concatenate([chain, pieces.edges])
     split = _closed(P, T, np.asarray(marked, bool), body, nc, moved)
     ref = refine_edges(P, T, split, moved, np.concatenate([P[chain_new], pieces.to]))
-    # the new nodes: the chain's become the strip's inner nodes, the others follow the rest's, then
-    # the arcs' midpoints of the halved corners
+    # the new nodes: the chain's become the strip's inner nodes, the others follow the rest's
     new = np.arange(len(P), len(ref.points))
     final = np.concatenate([np.arange(len(P)), np.zeros(len(new), np.int64)])
     on_chain = np.zeros(len(ref.points), bool)
@@ -91,22 +96,19 @@ def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, 
     final[k], on_chain[k] = chain_new, True
     own = new[~on_chain[new]]
     final[own] = len(P) + np.arange(len(own))
-    tip = len(P) + len(own) + np.arange(len(pieces.tip))
-    corner_new = final[_lookup(ref, *pieces.corner_edges.T)].reshape(2, -1)  # the new corners either side
-    points = np.concatenate([rest.points, ref.points[own], pieces.tip])
+    corner_new = final[_lookup(ref, *pieces.corner_edges.T)].reshape(2, -1)  # the cuts either side
+    points = np.concatenate([P[2 * nc:], ref.points[own]])  # the rest's nodes, the halved corners' moved
     allp = np.concatenate([strip, points])
-    kites = pieces.kites(corner_new, tip)
-    turned = doubled_areas(allp, kites) < 0
-    kites[turned] = kites[turned][:, ::-1]  # counter-clockwise, as the rest's
-    tris = np.concatenate([final[ref.triangles], kites])
+    tris = final[ref.triangles]
     d = allp[tris]
     e2 = np.max([np.sum((d[:, i] - d[:, i - 1]) ** 2, 1) for i in range(3)], 0)
     if np.any(doubled_areas(allp, tris) <= 2e-12 * e2):  # as check_triangles: no digits left below that
         raise FoldError("a triangle would fold over or go flat (the strip's inner chain moved across it)")
-    swap = np.arange(len(allp))
-    swap[pieces.corner_tip] = tip  # a halved corner leaves the hole's boundary: its arc's midpoint takes its place
-    parts = {name: swap[_chain(ref, final, remap[np.asarray(c)])] for name, c in rest.parts.items()}
-    vn, vw, va, ve = pieces.after(ref, final, tris, len(allp), corner_new, tip, allp)
+    if len(tris) and least_angles(d).min() < least:
+        raise FoldError("a triangle would be thinner than the last mesh's thinnest allows (the strip's inner chain "
+                        "moved a long way)")
+    parts = {name: _chain(ref, final, remap[np.asarray(c)]) for name, c in rest.parts.items()}
+    vn, vw, va, ve = pieces.after(ref, final, tris, len(allp), corner_new, allp)
     return RestMesh(points=points, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw, virtual_arc=va,
                     virtual_ends=ve)
 
@@ -115,9 +117,10 @@ class _Pieces:
     """The pieces beyond the free arcs (``RestMesh.virtual_*``, in the new numbering) and how the
     marked ones are halved. A segment (beyond a convex arc's chord): its chord is halved at the
     arc's midpoint, giving two segments. A corner (between a hole's tangent polygon and its circle,
-    the corner node where two tangents meet): the two tangents are cut where the tangents at the
-    arc's midpoint meet them, the midpoint joins the mesh (the corner node and the two cuts make it
-    a kite of two triangles) and two corners remain, each half as wide."""
+    the corner node where two tangents meet): the two tangents are cut where the tangent at the
+    arc's midpoint meets them, the corner node moves onto the arc's midpoint (its triangles follow;
+    a kite of two triangles there instead had angles of 11 degrees round a hole of 16 edges) and two
+    corners remain, each half as wide."""
 
     @classmethod
     def of(cls, rest: RestMesh, remap, P, marked, n_old: int) -> _Pieces:
@@ -136,23 +139,18 @@ class _Pieces:
         q = rc / (rc + out)  # tan(d / 4) / tan(d / 2): where the midpoint's tangent cuts each tangent
         self.corner_edges = np.concatenate([np.stack([a, k], 1), np.stack([k, b], 1)])
         self.corner_to = np.concatenate([P[a] + (P[k] - P[a]) * q, P[b] + (P[k] - P[b]) * q])
-        self.corner_tip = k
+        self.corner = k
         self.tip = cc + rc * (P[k] - cc) / out
         self.edges = np.concatenate([e, self.corner_edges]).astype(np.int64).reshape(-1, 2)
         self.to = np.concatenate([self.seg_mid, self.corner_to]).reshape(-1, 2)
         return self
 
-    def kites(self, corner_new, tip) -> np.ndarray:
-        """The two triangles filling each halved corner's kite (orientation set by the caller)."""
-        k = self.corner_tip
-        return np.concatenate([np.stack([corner_new[0], k, tip], 1), np.stack([tip, k, corner_new[1]], 1)])
-
-    def after(self, ref, final, tris, n, corner_new, tip, allp):
+    def after(self, ref, final, tris, n, corner_new, allp):
         """The pieces' nodes, weights, arcs and ends in the refined mesh."""
         keep_c = ~self.seg & ~self.cut_corner
-        a, _, b = self.nodes[self.cut_corner].T
-        c_nodes = np.concatenate([self.nodes[keep_c], np.stack([a, corner_new[0], tip], 1),
-                                  np.stack([tip, corner_new[1], b], 1)])
+        a, k, b = self.nodes[self.cut_corner].T
+        c_nodes = np.concatenate([self.nodes[keep_c], np.stack([a, corner_new[0], k], 1),
+                                  np.stack([k, corner_new[1], b], 1)])
         c_arc = np.concatenate([self.arc[keep_c], self.arc[self.cut_corner], self.arc[self.cut_corner]])
         c_area = 0.5 * np.abs(doubled_areas(allp, c_nodes))
         keep_s = self.seg & ~self.cut_seg
@@ -185,11 +183,14 @@ def _closed(P, T, marked, body, nc, forced) -> np.ndarray:
     split[inv[marked].ravel()] = True
     split &= ~fixed  # a marked triangle's fixed edges stay whole
     split[np.searchsorted(keys, edge_keys(forced[:, 0], forced[:, 1], n))] = True
-    for _ in range(64):  # each pass halves more; a marking closes in a few
-        more = (split[inv].sum(1) == 2)[:, None] & ~split[inv] & ~fixed[inv]
+    # a triangle with a halved edge has its longest halved too (so that no cut halves a small angle)
+    length = np.linalg.norm(P[a] - P[b], axis=1)
+    longest = inv[np.arange(len(T)), np.argmax(length[inv], axis=1)]
+    for _ in range(CLOSURE_PASSES):
+        more = split[inv].any(axis=1) & ~split[longest] & ~fixed[longest]
         if not more.any():
             break
-        split[inv[more]] = True
+        split[longest[more]] = True
     return np.stack([a[split], b[split]], 1)
 
 
