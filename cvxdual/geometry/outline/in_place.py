@@ -105,8 +105,8 @@ def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, 
     if np.any(doubled_areas(allp, tris) <= 2e-12 * e2):  # as check_triangles: no digits left below that
         raise FoldError("a triangle would fold over or go flat (the strip's inner chain moved across it)")
     if len(tris) and least_angles(d).min() < least:
-        raise FoldError("a triangle would be thinner than the last mesh's thinnest allows (the strip's inner chain "
-                        "moved a long way)")
+        raise FoldError("a triangle would have an angle below half the last mesh's least (its longest edge stays "
+                        "whole on the chain or a curve, or the chain moved far)")
     parts = {name: _chain(ref, final, remap[np.asarray(c)]) for name, c in rest.parts.items()}
     vn, vw, va, ve = pieces.after(ref, final, tris, len(allp), corner_new, allp)
     return RestMesh(points=points, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw, virtual_arc=va,
