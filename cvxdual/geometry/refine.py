@@ -8,9 +8,9 @@ gmsh makes a quarter of the triangles. A triangle with one edge left whole (the 
 which the strip's own mesh does not split) is cut into three instead: the corner between the
 halved edges, and the rest along the shorter diagonal.
 
-:func:`refine_edges` halves chosen edges only: local refinement, red-green (a triangle with one
-halved edge is cut in two from its new node to the opposite corner), for a run to a tolerance's
-cycles that refine the last mesh in place (:mod:`~cvxdual.geometry.outline.in_place`).
+:func:`refine_edges` halves chosen edges only (local refinement: a triangle with one halved edge
+is cut in two from its new node to the opposite corner), for a run to a tolerance's cycles that
+refine the last mesh in place (:mod:`~cvxdual.geometry.outline.in_place`, which chooses the edges).
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def refine_edges(points: np.ndarray, triangles: np.ndarray, edges, moved=None, t
     """Halve the edges ``edges`` ``(s, 2)`` of ``triangles`` only (local refinement; ``moved``,
     ``to`` as in :func:`refine`): a triangle with three halved edges gives four, with two three,
     with one two (cut from the halved edge's new node to the opposite corner), with none itself.
-    The caller closes the marking (a triangle with two halved edges had better have three)."""
+    Which edges keep the shapes is the caller's choice (the in-place cycles halve longest edges)."""
     tri = np.asarray(triangles, np.int64)
     keys, inv = _edges(tri, len(points))
     split = np.zeros(len(keys), bool)
