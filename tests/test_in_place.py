@@ -12,6 +12,7 @@ import pytest
 
 import cvxdual
 from cvxdual.adapt.outline_view import outline_scene
+from cvxdual.cli import main
 from cvxdual.geometry.grid import InPlace
 from cvxdual.geometry.refine import refine_edges
 from cvxdual.geometry.triangles import doubled_areas, edge_keys, least_angles
@@ -136,3 +137,9 @@ def test_a_run_alternates_gmsh_and_in_place():
     assert len(meshed) >= 3
     assert all(m == (Meshed.GMSH,) * 2 if i % 2 == 0 else m == (Meshed.IN_PLACE,) * 2 for i, m in enumerate(meshed))
     assert sol.adaptive.met and sol.bounds["guaranteed"]
+
+
+def test_the_progress_says_which_cycles_were_refined_in_place(capsys):
+    assert main(["solve", "--scene", "block-with-hole", "--triangulation", "type2", "--tol", "1%", "--no-output"]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ": cycle " in ln]
+    assert len(lines) == 2 and "in place" not in lines[0] and "(refined in place)" in lines[1]

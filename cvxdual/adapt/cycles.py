@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from ..errors import CvxdualError, MeshError, TimeLimitError, ToleranceError, TooLargeError
 from ..geometry.grid import Grid, InPlace
 from ..geometry.triangulation import uniform_grid
-from ..kinds import Stop
+from ..kinds import Meshed, Stop
 from ..progress import Deadline, log, phase
 from ..records import AdaptiveHistory, Cycle
 from .marking import THETA, mark
@@ -102,8 +102,8 @@ def refine_to_tolerance(run, certify, scene, plan: Plan, deadline: Deadline, mem
                             energy_upper=float(b["energy_upper"]), bound_rel=rel, guaranteed=bool(b["guaranteed"]),
                             marked_share=None if marks is None else marks.share,
                             meshed=tuple(bm.meshed for bm in sol.mesh.bodies), seconds=now - t, elapsed=now - t0))
-        log.info("cycle %d: %d pieces, certified error %.3g %%%s, %.2f s", len(cycles) - 1, cycles[-1].pieces,
-                 100 * rel, "" if b["guaranteed"] else " (not guaranteed)", now - t)
+        log.info("cycle %d: %d pieces%s, certified error %.3g %%%s, %.2f s", len(cycles) - 1, cycles[-1].pieces,
+                 _how(sol.mesh.bodies), 100 * rel, "" if b["guaranteed"] else " (not guaranteed)", now - t)
         if best is None or rel <= best[1]:
             best = (sol, rel, len(cycles) - 1)
         if met:
@@ -145,6 +145,14 @@ def _relative_bound(sol, cycle: int) -> float:
             f"every load) while the certified bound sqrt(2 G) is {b['error_bound']:.3g} (absolute): a relative "
             "error has nothing to be relative to")
     raise CvxdualError(f"{what}; solve at a level instead of to tol", cli=f"{what}; use --level instead of --tol")
+
+
+def _how(bodies) -> str:
+    """What the cycle's progress line says of its mesh: which bodies were refined in place (none: gmsh's)."""
+    names = [bm.body.name for bm in bodies if bm.meshed is Meshed.IN_PLACE]
+    if not names:
+        return ""
+    return " (refined in place)" if len(names) == len(bodies) else f" ({', '.join(names)} refined in place)"
 
 
 def _growth(old: Grid, new: Grid) -> float:
