@@ -137,13 +137,10 @@ def mark(grid: Grid, space, contributions, theta: float = THETA) -> Marks:
         beyond = (height > 1.5 * depth) & (size > 0)  # a spot of size 0 would ask gmsh for no mesh
         spots.append(np.stack([x[beyond], y[beyond], 0.5 * size[beyond]], 1))
     share = float(loc.weight[chosen].sum() / loc.weight.sum()) if loc.weight.sum() > 0 else 0.0
-    n_arcs = sum(len(bm.rest.virtual_weight) for bm in space.mesh.bodies if bm.rest is not None)
-    arcs, at = [], len(chosen) - n_arcs  # the pieces beyond free arcs come last, body by body
-    for bm in space.mesh.bodies:
-        m = 0 if bm.rest is None else len(bm.rest.virtual_weight)
-        arcs.append(chosen[at:at + m])
-        at += m
-    return Marks(cols, tuple(spots), share, _rest_marks(space, chosen[:len(space.tri)]), tuple(arcs))
+    _, _, cbody = space.mesh.continuation()
+    beyond = chosen[len(chosen) - len(cbody):]  # the pieces beyond free arcs come last (located)
+    arcs = tuple(beyond[cbody == k] for k in range(len(space.mesh.bodies)))
+    return Marks(cols, tuple(spots), share, _rest_marks(space, chosen[:len(space.tri)]), arcs)
 
 
 def _rest_marks(space, chosen: np.ndarray) -> tuple:

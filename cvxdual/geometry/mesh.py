@@ -30,8 +30,7 @@ from ..records import MeshSize
 from ..scene.scene import Body, Scene
 from ..validate import short
 from .mesh_check import check_body_mesh
-from .outline import ContinuationRule, RestMesh, continuation_rule, held_parts, mesh_rest, strip_depth
-from .outline.in_place import refine_in_place
+from .outline import ContinuationRule, RestMesh, continuation_rule, held_parts, mesh_rest, refine_in_place, strip_depth
 from .triangles import edge_lengths
 
 MAX_COUNTED_COLUMNS = 1e12  # beyond this, an outline body is counted by its strip alone (already too large)

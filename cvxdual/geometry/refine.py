@@ -38,23 +38,26 @@ class Refined:
     edge_keys: np.ndarray  # sorted
     edge_mid: np.ndarray  # the new node of each edge, -1 for an edge left whole
 
-    def midpoints(self, a, b) -> np.ndarray:
-        """The new node on each old edge ``(a[i], b[i])`` (-1 if it was left whole)."""
+    def midpoints(self, a, b, strict: bool = True) -> np.ndarray:
+        """The new node on each old edge ``(a[i], b[i])`` (-1 if it was left whole); ``strict``:
+        a pair that is no edge of the mesh is an error, else -1 too (a strip's side, in place)."""
         k = edge_keys(a, b, self.n_old)
-        pos = np.clip(np.searchsorted(self.edge_keys, k), 0, len(self.edge_keys) - 1)
-        if len(k) and not np.array_equal(self.edge_keys[pos], k):
+        pos = np.clip(np.searchsorted(self.edge_keys, k), 0, max(len(self.edge_keys) - 1, 0))
+        found = self.edge_keys[pos] == k if len(self.edge_keys) else np.zeros(len(k), bool)
+        if strict and not found.all():
             raise MeshError("internal: an edge asked of the refined mesh is not one of its edges")
-        return self.edge_mid[pos]
+        return np.where(found, self.edge_mid[pos] if len(self.edge_keys) else -1, -1)
 
     def chain(self, nodes) -> np.ndarray:
         """A path of old nodes with the new node of each of its edges between its ends."""
         return self.chains({0: nodes})[0]
 
-    def chains(self, paths: dict) -> dict:
-        """:meth:`chain` of every path of ``paths`` (any keys), with one lookup for all their edges."""
+    def chains(self, paths: dict, strict: bool = True) -> dict:
+        """:meth:`chain` of every path of ``paths`` (any keys), with one lookup for all their edges
+        (``strict`` as in :meth:`midpoints`)."""
         paths = {k: np.asarray(v, np.int64) for k, v in paths.items()}
         mid = self.midpoints(*(np.concatenate([np.zeros(0, np.int64)] + [p[s] for p in paths.values()])
-                               for s in (slice(None, -1), slice(1, None))))
+                               for s in (slice(None, -1), slice(1, None))), strict=strict)
         out, at = {}, 0
         for k, p in paths.items():
             seq = np.stack([p[:-1], mid[at:at + max(len(p) - 1, 0)]], 1).ravel()

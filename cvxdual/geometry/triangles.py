@@ -1,5 +1,5 @@
 """Helpers on arrays of triangles ``(m, 3)`` (node indices) shared by the meshes, their
-refinement and the equilibrium space's edges: one integer key per undirected edge, signed
+refinement and the equilibrium space's edges: one integer key per undirected edge, the triangle on an edge, signed
 areas, edge lengths and least angles; and on arrays of corners ``(m, 3, 2)``: the barycentric (Alfeld) split the
 Johnson-Mercier element and the P2 displacement share, barycentric gradients."""
 
@@ -13,6 +13,20 @@ def edge_keys(a, b, n_nodes: int) -> np.ndarray:
     for ``(b, a)``, sorted as ``(min, max)`` pairs are."""
     a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
     return np.minimum(a, b) * n_nodes + np.maximum(a, b)
+
+
+def edge_triangles(tris: np.ndarray, a, b, n_nodes: int) -> np.ndarray:
+    """A triangle of ``tris`` on each edge ``(a[i], b[i])`` (the one, on a boundary edge), -1 where
+    none has it; only the triangles at those nodes are searched."""
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    near = np.flatnonzero(np.isin(tris, np.concatenate([a, b])).any(axis=1))
+    keys = edge_keys(tris[near], np.roll(tris[near], -1, axis=1), n_nodes).ravel()  # edge j of i at 3 i + j
+    order = np.argsort(keys)
+    k = edge_keys(a, b, n_nodes)
+    if not len(keys):
+        return np.full(len(k), -1)
+    at = np.clip(np.searchsorted(keys[order], k), 0, len(keys) - 1)
+    return np.where(keys[order][at] == k, near[order[at] // 3], -1)
 
 
 def doubled_areas(points: np.ndarray, tris: np.ndarray) -> np.ndarray:

@@ -84,8 +84,10 @@ class StressSpace(ABC):
         with phase("recover", deadline) as p:
             sol = solved.solution if solved.solution is not None else \
                 self.recover(scene, triangulation, system.mesh.level, system, built, solved)
-            error, t_error = self._exact_error(sol) if exact_error else (sol.error, 0.0)
-            sol = replace(sol, error=error)
+            t_error = 0.0
+            if exact_error:
+                error, t_error = self._exact_error(sol)
+                sol = replace(sol, error=error)
             p.detail = self.recovered(sol)
         t4 = time.perf_counter()
         sol = replace(sol, timings={"mesh": t1 - t0, "assemble": t2 - t1, "build": solved.build_time,

@@ -8,10 +8,11 @@ tolerance's every other cycle); ``arcs`` holds the curved parts' polygons, ``fen
 ``worker`` the gmsh process, ``quadrature`` a rule on the exact pieces beyond the free arcs."""
 
 from .build import SPLINE_SAMPLES, held_parts
+from .in_place import refine_in_place
 from .mesher import SMALL, forget_meshes, gmsh_mesh, gmsh_seconds, mesh_rest, mesh_threads
 from .quadrature import ContinuationRule, continuation_rule
 from .readback import RestMesh
 from .sizes import strip_depth
 
 __all__ = ["SMALL", "SPLINE_SAMPLES", "ContinuationRule", "RestMesh", "continuation_rule", "forget_meshes",
-           "gmsh_mesh", "gmsh_seconds", "held_parts", "mesh_rest", "mesh_threads", "strip_depth"]
+           "gmsh_mesh", "gmsh_seconds", "held_parts", "mesh_rest", "mesh_threads", "refine_in_place", "strip_depth"]

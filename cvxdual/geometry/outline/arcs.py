@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...scene.planar import inside, meeting_pairs, point_segment_distance
-from ..triangles import doubled_areas, edge_keys
+from ..triangles import doubled_areas, edge_triangles
 
 CLASH_SAMPLES = 256  # points per curved segment when measuring how far a polygon strays from its curve
 
@@ -45,13 +45,8 @@ def continuation(virtual: dict, xy: np.ndarray, idx: np.ndarray, tris: np.ndarra
         return np.zeros((0, 3), int), np.zeros(0), arc, np.zeros((0, 2), int)
     c_nodes = idx[match_rows(corner.reshape(-1, 2), xy)].reshape(-1, 3)
     c_area = 0.5 * np.abs(doubled_areas(allp, c_nodes))
-    # the triangle on each chord: its edge key among the edges of the triangles at the chords' ends
-    n = int(tris.max()) + 1
     ends = np.sort(idx[match_rows(chord.reshape(-1, 2), xy)].reshape(-1, 2), axis=1)
-    near = np.flatnonzero(np.isin(tris, ends).any(axis=1))
-    keys = edge_keys(tris[near], np.roll(tris[near], -1, axis=1), n).ravel()  # edge j of triangle i at 3 i + j
-    order = np.argsort(keys)
-    t = near[order[np.searchsorted(keys[order], edge_keys(ends[:, 0], ends[:, 1], n))] // 3]
+    t = edge_triangles(tris, ends[:, 0], ends[:, 1], int(tris.max()) + 1)  # the triangle on each chord
     return (np.concatenate([c_nodes, tris[t]]).astype(int),
             np.concatenate([c_area, np.asarray(virtual["segment_area"], float)]),
             arc, np.concatenate([c_nodes[:, [0, 2]], ends]).astype(int))

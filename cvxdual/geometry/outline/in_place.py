@@ -23,7 +23,7 @@ import numpy as np
 
 from ...scene.planar import point_segment_distance
 from ..refine import FoldError, refine_edges
-from ..triangles import doubled_areas, edge_keys, edge_lengths, least_angles
+from ..triangles import doubled_areas, edge_keys, edge_lengths, edge_triangles, least_angles
 from .readback import RestMesh
 from .sizes import SizeField
 
@@ -44,17 +44,19 @@ def refine_in_place(body, prior, columns, face_y, inner, level: int, spots: tupl
     the pieces beyond free arcs ``arcs`` (bool, one per triangle and per piece of ``prior.rest``)
     halved, and those the size field of ``level`` asks markedly less of (:func:`asks_less`; ``spots``:
     the old spots and the new, :class:`~cvxdual.geometry.outline.sizes.SizeField`)."""
-    tri, arc = asks_less(prior, columns, inner, level, *spots)
-    least = float(least_angles(prior.points()[prior.rest.triangles]).min()) if len(prior.rest.triangles) else 0.0
+    pts = prior.points()
+    tri, arc = asks_less(prior, pts, columns, inner, level, *spots)
+    least = float(least_angles(pts[prior.rest.triangles]).min()) if len(prior.rest.triangles) else 0.0
     return _refined(body, prior.rest, prior.columns, columns, face_y, inner, np.asarray(marked, bool) | tri,
                     np.asarray(arcs, bool) | arc, KEEP_ANGLE * least)
 
 
-def asks_less(prior, columns, inner, level: int, old_spots, spots) -> tuple[np.ndarray, np.ndarray]:
-    """The triangles of ``prior``'s gmsh part, and its pieces beyond free arcs (by their chords), whose
-    size the field of the new strip ``(columns, inner)`` and ``spots`` asks to shrink below :data:`SHRINK`
-    times and that are larger than :data:`SIZE_SLACK` times it: where gmsh would now make smaller ones."""
-    pts, rest = prior.points(), prior.rest
+def asks_less(prior, pts, columns, inner, level: int, old_spots, spots) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of ``prior``'s gmsh part (its nodes ``pts``), and its pieces beyond free arcs (by
+    their chords), whose size the field of the new strip ``(columns, inner)`` and ``spots`` asks to
+    shrink below :data:`SHRINK` times and that are larger than :data:`SIZE_SLACK` times it: where gmsh
+    would now make smaller ones."""
+    rest = prior.rest
     X = pts[rest.triangles]
     ends = pts[rest.virtual_ends]
     at = np.concatenate([X.mean(1), ends.mean(1)])
@@ -92,11 +94,11 @@ def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, 
     new = np.arange(len(P), len(ref.points))
     final = np.concatenate([np.arange(len(P)), np.zeros(len(new), np.int64)])
     on_chain = np.zeros(len(ref.points), bool)
-    k = _lookup(ref, chain[:, 0], chain[:, 1])
+    k = ref.midpoints(chain[:, 0], chain[:, 1])
     final[k], on_chain[k] = chain_new, True
     own = new[~on_chain[new]]
     final[own] = len(P) + np.arange(len(own))
-    corner_new = final[_lookup(ref, *pieces.corner_edges.T)].reshape(2, -1)  # the cuts either side
+    corner_new = final[ref.midpoints(*pieces.corner_edges.T)].reshape(2, -1)  # the cuts either side
     points = np.concatenate([P[2 * nc:], ref.points[own]])  # the rest's nodes, the halved corners' moved
     allp = np.concatenate([strip, points])
     tris = final[ref.triangles]
@@ -107,7 +109,9 @@ def _refined(body, rest: RestMesh, old_columns, columns, face_y, inner, marked, 
     if len(tris) and least_angles(d).min() < least:
         raise FoldError("a triangle would have an angle below half the last mesh's least (its longest edge stays "
                         "whole on the chain or a curve, or the chain moved far)")
-    parts = {name: _chain(ref, final, remap[np.asarray(c)]) for name, c in rest.parts.items()}
+    # a part's path may run along a strip's side, no edge of this mesh: strict=False keeps those whole
+    parts = {name: final[c] for name, c in ref.chains({k: remap[np.asarray(c)] for k, c in rest.parts.items()},
+                                                       strict=False).items()}
     vn, vw, va, ve = pieces.after(ref, final, tris, len(allp), corner_new, allp)
     return RestMesh(points=points, triangles=tris, parts=parts, virtual_nodes=vn, virtual_weight=vw, virtual_arc=va,
                     virtual_ends=ve)
@@ -127,7 +131,8 @@ class _Pieces:
         self = cls()
         self.nodes, self.ends = remap[rest.virtual_nodes], remap[rest.virtual_ends]
         self.arc, self.weight = rest.virtual_arc, rest.virtual_weight
-        self.seg = _is_edge(rest.triangles, rest.virtual_ends, n_old)  # a segment's ends are its triangle's edge
+        # a segment's ends are an edge of its triangle; a corner's are not an edge
+        self.seg = edge_triangles(rest.triangles, *rest.virtual_ends.T, n_old) >= 0
         self.cut_seg, self.cut_corner = self.seg & marked, ~self.seg & marked
         c, r = self.arc[:, :2], self.arc[:, 2:]
         e = self.ends[self.cut_seg]
@@ -155,7 +160,7 @@ class _Pieces:
         c_area = 0.5 * np.abs(doubled_areas(allp, c_nodes))
         keep_s = self.seg & ~self.cut_seg
         e = self.ends[self.cut_seg]
-        mid = final[_lookup(ref, e[:, 0], e[:, 1])]
+        mid = final[ref.midpoints(e[:, 0], e[:, 1])]
         s_ends = np.concatenate([self.ends[keep_s], np.stack([e[:, 0], mid], 1), np.stack([mid, e[:, 1]], 1)])
         s_arc = np.concatenate([self.arc[keep_s], self.arc[self.cut_seg], self.arc[self.cut_seg]])
         halves = s_ends[int(keep_s.sum()):]
@@ -178,7 +183,9 @@ def _closed(P, T, marked, body, nc, forced) -> np.ndarray:
     a, b = keys // n, keys % n
     count = np.bincount(inv.ravel(), minlength=len(keys))
     chain = (a < 2 * nc) & (b < 2 * nc)  # both ends strip nodes: on the chain (or a face end's)
-    fixed = chain | ((count == 1) & ~_straight(body, P[a], P[b]))
+    fixed = chain.copy()
+    out = np.flatnonzero(count == 1)  # the outline's edges: fixed unless straight
+    fixed[out] |= ~_straight(body, P[a[out]], P[b[out]])
     split = np.zeros(len(keys), bool)
     split[inv[marked].ravel()] = True
     split &= ~fixed  # a marked triangle's fixed edges stay whole
@@ -205,33 +212,9 @@ def _straight(body, p, q) -> np.ndarray:
     return on.any(axis=1)
 
 
-def _lookup(ref, a, b) -> np.ndarray:
-    """The new node on each old edge ``(a[i], b[i])``, -1 where it stayed whole or is no edge of the mesh."""
-    k = edge_keys(a, b, ref.n_old)
-    pos = np.clip(np.searchsorted(ref.edge_keys, k), 0, max(len(ref.edge_keys) - 1, 0))
-    found = ref.edge_keys[pos] == k if len(ref.edge_keys) else np.zeros(len(k), bool)
-    return np.where(found, ref.edge_mid[pos], -1)
-
-
-def _chain(ref, final, path) -> np.ndarray:
-    """An old node path with the new node of each halved edge between its ends, renumbered ``final``."""
-    mid = _lookup(ref, path[:-1], path[1:])
-    seq = np.stack([path[:-1], mid], 1).ravel()
-    return final[np.append(seq[seq >= 0], path[-1:])]
-
-
-def _is_edge(tris, ends, n) -> np.ndarray:
-    """Whether each node pair ``ends`` ``(m, 2)`` is an edge of ``tris``."""
-    keys = edge_keys(tris, np.roll(tris, -1, axis=1), n).ravel()
-    return np.isin(edge_keys(ends[:, 0], ends[:, 1], n), keys)
-
-
 def _on_edge(tris, ends, n) -> np.ndarray:
     """The triangle of ``tris`` on each boundary edge ``ends`` ``(m, 2)`` (its one triangle)."""
-    keys = edge_keys(tris, np.roll(tris, -1, axis=1), n).ravel()  # edge j of triangle i at 3 i + j
-    order = np.argsort(keys)
-    k = edge_keys(ends[:, 0], ends[:, 1], n)
-    at = np.clip(np.searchsorted(keys[order], k), 0, max(len(keys) - 1, 0))
-    if len(k) and not np.array_equal(keys[order][at], k):
+    t = edge_triangles(tris, ends[:, 0], ends[:, 1], n)
+    if np.any(t < 0):
         raise FoldError("internal: a chord of a free arc was halved")  # pragma: no cover - chords are fixed edges
-    return tris[order[at] // 3]
+    return tris[t]
